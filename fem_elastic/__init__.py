@@ -1,0 +1,60 @@
+"""fem_elastic: elastic solids with the finite element method, built on scikit-fem.
+
+The public surface (see ``DESIGN.md``)::
+
+    import fem_elastic as fe
+    mesh = fe.beam_mesh(length=1.0, width=0.1, height=0.1, cells=(20, 2, 2))
+    model = fe.Model(mesh, density=1000.0,
+                     body=fe.ElasticBody(fe.NeoHookean(E=1e6, nu=0.45), order=2),
+                     fixed="left", gravity=(0.0, 0.0, -9.81))
+    static = fe.solve_static(model)
+
+``import fem_elastic`` needs only numpy, scipy and scikit-fem: meshio is
+imported inside the I/O functions, pyamg inside the AMG solver.
+"""
+
+from .analytic import RectangularCantilever
+from .elastic_body import ElasticBody, ElasticPotential
+from .errors import (
+    Diverged,
+    FemElasticError,
+    InvalidMesh,
+    InvalidParameter,
+    NotConverged,
+    UnderConstrained,
+)
+from .io import load_mesh, save_mesh
+from .linear_solvers import AMGSolver, AutoSolver, DirectSolver, SingularMatrix
+from .materials import (
+    Corotated,
+    LinearElastic,
+    Material,
+    NeoHookean,
+    StableNeoHookean,
+    StVK,
+    lame_parameters,
+)
+from .mesh import (
+    beam_mesh,
+    mesh_from_arrays,
+    mesh_quality,
+    remove_unused_vertices,
+    reorient,
+    signed_volumes,
+    validate_mesh,
+)
+from .model import Model
+from .potential import LinearPotential, Potential
+from .static import StaticResult, solve_static
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "AMGSolver", "AutoSolver", "Corotated", "DirectSolver", "Diverged", "ElasticBody",
+    "ElasticPotential", "FemElasticError", "InvalidMesh", "InvalidParameter", "LinearElastic",
+    "LinearPotential", "Material", "Model", "NeoHookean", "NotConverged", "Potential",
+    "RectangularCantilever", "SingularMatrix", "StableNeoHookean", "StaticResult", "StVK",
+    "UnderConstrained", "beam_mesh", "lame_parameters", "load_mesh", "mesh_from_arrays",
+    "mesh_quality", "remove_unused_vertices", "reorient", "save_mesh", "signed_volumes",
+    "solve_static", "validate_mesh",
+]

@@ -1,0 +1,204 @@
+"""The finite element space of a body: scikit-fem bases, DOF maps, quadrature data.
+
+A :class:`Discretization` is built once per model and holds everything the
+energy kernels need that does not depend on the deformation:
+
+- the vector Lagrange basis (P1 or P2 tets) on which the elastic energy is
+  integrated, and a second one with a richer quadrature for the mass matrix;
+- the reference-gradient of every scalar shape function at every quadrature
+  point, ``dN`` with shape ``(nloc, 3, nelems, nqp)`` (1/m), and the quadrature
+  weights times the Jacobian, ``dx`` with shape ``(nelems, nqp)`` (m^3);
+- the element DOF table ``element_dofs`` (``(3 * nloc, nelems)``, scikit-fem's
+  node-major interleaved order: DOF ``3 * node + component``);
+- the reference position of every DOF, ``X`` (``(ndofs,)``, m): vertices and,
+  for P2, edge midpoints.
+
+Displacements are handed to users at mesh vertices: ``vertex_dofs`` maps each
+vertex to its three DOFs whatever the element order.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+from skfem import Basis, ElementTetP1, ElementTetP2, ElementVector, MeshTet
+
+from .errors import InvalidMesh, InvalidParameter
+
+__all__ = ["Discretization", "SparsityPattern"]
+
+_ELEMENTS = {1: ElementTetP1, 2: ElementTetP2}
+
+
+class SparsityPattern:
+    """A fixed CSR pattern and the map from element-matrix entries into it.
+
+    Assembling a global matrix is then one ``np.bincount`` of the element
+    entries into the CSR data array, instead of a COO-to-CSR conversion (which
+    sorts every entry) at each Newton iteration. The map is built on the
+    node graph (9 times fewer entries than the DOF graph) and expanded to the
+    3x3 blocks of the interleaved DOF order ``3 * node + component``.
+
+    Parameters
+    ----------
+    element_dofs : numpy.ndarray
+        ``(3 * nloc, nelems)`` global DOFs of each element, in node-major
+        interleaved order (``element_dofs[3 a + i] == 3 * node_a + i``).
+    ndofs : int
+        Size of the square matrix, a multiple of 3.
+    """
+
+    def __init__(self, element_dofs: np.ndarray, ndofs: int):
+        nodes = element_dofs[0::3] // 3  # (nloc, ne)
+        if not all(np.array_equal(element_dofs[i::3], 3 * nodes + i) for i in range(3)):
+            raise ValueError("element DOFs are not in node-major interleaved order")
+        nl, ne = nodes.shape
+        nn = ndofs // 3
+        rows = np.broadcast_to(nodes[:, None, :], (nl, nl, ne)).ravel()
+        cols = np.broadcast_to(nodes[None, :, :], (nl, nl, ne)).ravel()
+        graph = sp.csr_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(nn, nn))
+        graph.sum_duplicates()  # sorts the column indices of each row
+        sptr = graph.indptr.astype(np.int64)
+        deg = np.diff(sptr)
+        node_row = np.repeat(np.arange(nn, dtype=np.int64), deg)
+        keys = node_row * nn + graph.indices
+        # position of each element node pair (a, b) in the node graph's CSR data
+        spos = np.searchsorted(keys, rows.astype(np.int64) * nn + cols).reshape(nl, nl, ne)
+        rank = spos - sptr[nodes][:, None, :]  # rank of node b within row a
+        # DOF row 3n+i holds 3 deg(n) entries, starting at 9 sptr[n] + 3 i deg(n);
+        # entry (3n+i, 3m+k) is at that start + 3 rank(m in row n) + k.
+        base = 9 * sptr[nodes]  # (nl, ne)
+        d3 = 3 * deg[nodes]
+        i3 = np.arange(3)
+        scatter = (
+            base[:, None, None, None, :]
+            + i3[None, :, None, None, None] * d3[:, None, None, None, :]
+            + 3 * rank[:, None, :, None, :]
+            + i3[None, None, None, :, None]
+        )  # (a, i, b, k, e)
+        self.scatter = scatter.reshape(-1)
+        self.indptr = np.concatenate([[0], np.cumsum(np.repeat(3 * deg, 3))]).astype(np.int64)
+        # Column indices: DOF row 3n+i lists 3m+k for the nodes m of node row n
+        # (sorted), k = 0, 1, 2; the same list for i = 0, 1, 2.
+        nnz_nodes = graph.indices.size
+        block_cols = (3 * graph.indices.astype(np.int64))[:, None] + i3[None, :]
+        first = 9 * sptr[node_row] + 3 * (np.arange(nnz_nodes) - sptr[node_row])
+        idx = np.empty(9 * nnz_nodes, dtype=np.int64)
+        for i in range(3):
+            idx[((first + 3 * i * deg[node_row])[:, None] + i3[None, :]).ravel()] = block_cols.ravel()
+        self.indices = idx
+        self.shape = (ndofs, ndofs)
+        self.nnz = idx.size
+        self._row_of = np.repeat(np.arange(ndofs, dtype=np.int64), np.diff(self.indptr))
+
+    def assemble(self, element_matrices: np.ndarray) -> sp.csr_matrix:
+        """Sum element matrices, shape ``(3 nloc, 3 nloc, nelems)``, into a CSR matrix."""
+        data = np.bincount(self.scatter, weights=element_matrices.ravel(), minlength=self.nnz)
+        return sp.csr_matrix((data, self.indices, self.indptr), shape=self.shape, copy=False)
+
+    @cached_property
+    def diagonal_positions(self) -> np.ndarray:
+        """Position in the data array of each diagonal entry, ``(ndofs,)``."""
+        n = self.shape[0]
+        keys = self._row_of * n + self.indices
+        return np.searchsorted(keys, np.arange(n, dtype=np.int64) * (n + 1))
+
+    def entries_touching(self, dofs_mask: np.ndarray) -> np.ndarray:
+        """Boolean mask over the data array: entries whose row or column is in the mask."""
+        return dofs_mask[self._row_of] | dofs_mask[self.indices]
+
+
+class Discretization:
+    """Vector Lagrange tets on a mesh, with the data the kernels need.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshTet
+        The reference configuration (m).
+    order : {1, 2}
+        Polynomial order of the tets: 1 = linear (P1), 2 = quadratic (P2).
+
+    Examples
+    --------
+    >>> from fem_elastic import beam_mesh
+    >>> d = Discretization(beam_mesh(cells=(1, 1, 1)), order=2)  # 6 tets, 27 nodes
+    >>> d.ndofs, d.dN.shape, d.dx.shape
+    (81, (10, 3, 6, 4), (6, 4))
+    """
+
+    def __init__(self, mesh: MeshTet, order: int = 1):
+        if order not in _ELEMENTS:
+            raise InvalidParameter(
+                f"element order must be 1 (linear tets) or 2 (quadratic tets), got {order!r}."
+            )
+        if not isinstance(mesh, MeshTet):
+            raise InvalidMesh(
+                f"a tetrahedral mesh (skfem.MeshTet) is needed, got {type(mesh).__name__}; "
+                "use fe.beam_mesh(...) or fe.load_mesh(path) on a tet mesh."
+            )
+        self.mesh = mesh
+        self.order = order
+        scalar = _ELEMENTS[order]()
+        # Quadrature exact for the stiffness of linear elasticity: degree 2 (order - 1).
+        self.intorder = 2 * (order - 1) if order > 1 else 1
+        self.basis = Basis(mesh, ElementVector(scalar), intorder=self.intorder)
+        # The mass matrix integrates a degree-2*order polynomial; its own quadrature.
+        self.mass_basis = Basis(mesh, ElementVector(scalar), intorder=2 * order)
+        sbasis = Basis(mesh, scalar, quadrature=self.basis.quadrature)
+        self.dN = np.stack([phi[0].grad for phi in sbasis.basis])  # (nloc, 3, ne, nq)
+        self.dx = np.asarray(self.basis.dx)  # (ne, nq)
+        self.element_dofs = np.asarray(self.basis.element_dofs, dtype=np.int64)
+        self.ndofs = int(self.basis.N)
+        dofs = np.arange(self.ndofs)
+        self.X = np.asarray(self.basis.doflocs)[dofs % 3, dofs].copy()
+        self.vertex_dofs = np.asarray(self.basis.nodal_dofs, dtype=np.int64).T  # (nverts, 3)
+
+    @property
+    def nloc(self) -> int:
+        """Scalar shape functions per element (4 for P1, 10 for P2)."""
+        return self.dN.shape[0]
+
+    @cached_property
+    def pattern(self) -> SparsityPattern:
+        """The CSR pattern of every matrix on this space (built on first use)."""
+        return SparsityPattern(self.element_dofs, self.ndofs)
+
+    def gather(self, u: np.ndarray) -> np.ndarray:
+        """Element DOF values of a flat vector, shape ``(nloc, 3, nelems)``."""
+        return u[self.element_dofs].reshape(self.nloc, 3, -1)
+
+    def scatter(self, f_e: np.ndarray) -> np.ndarray:
+        """Sum element vectors ``(nloc, 3, nelems)`` into a flat ``(ndofs,)`` vector."""
+        return np.bincount(self.element_dofs.ravel(), weights=f_e.ravel(), minlength=self.ndofs)
+
+    def deformation_gradient(self, u: np.ndarray) -> np.ndarray:
+        """F = I + grad u at every quadrature point, shape ``(3, 3, nelems, nqp)``."""
+        ue = self.gather(u)
+        F = np.einsum("aie,ajeq->ijeq", ue, self.dN, optimize=True)
+        for i in range(3):
+            F[i, i] += 1.0
+        return F
+
+    def to_vertices(self, x: np.ndarray) -> np.ndarray:
+        """Vertex values ``(nverts, 3)`` of a flat DOF vector."""
+        return x[self.vertex_dofs]
+
+    def rigid_body_modes(self, center: np.ndarray | None = None) -> np.ndarray:
+        """The six rigid-body modes as columns, ``(ndofs, 6)``.
+
+        Three translations, then three infinitesimal rotations about
+        ``center`` (default: the centroid of the DOF locations).
+        """
+        Xp = self.X.reshape(-1, 3)
+        c = Xp.mean(axis=0) if center is None else np.asarray(center)
+        r = Xp - c
+        B = np.zeros((Xp.shape[0], 3, 6))
+        for k in range(3):
+            B[:, k, k] = 1.0
+        # omega x r for unit omega along x, y, z
+        B[:, 1, 3], B[:, 2, 3] = -r[:, 2], r[:, 1]
+        B[:, 0, 4], B[:, 2, 4] = r[:, 2], -r[:, 0]
+        B[:, 0, 5], B[:, 1, 5] = -r[:, 1], r[:, 0]
+        return B.reshape(-1, 6)

@@ -1,0 +1,174 @@
+"""The scikit-fem adapter: an elastic body as a Potential of the nodal positions.
+
+The total elastic energy of the body is
+
+    E(x) = sum_e sum_q psi(F(x)_eq) dx_eq,
+
+with ``F = I + grad u`` at each quadrature point, ``u = x - X`` the displacement
+and ``dx`` the quadrature weight times the Jacobian (m^3). Its gradient (the
+internal force with the sign flipped, N) and its Hessian (the tangent
+stiffness, N/m) follow from ``P = dpsi_dF`` and ``C = d2psi_dF2``:
+
+    g_ai = sum_q P_ij dN_a,j dx,          K_ai,bk = sum_q dN_a,j C_ijkl dN_b,l dx.
+
+scikit-fem supplies the basis, quadrature and DOF maps (see
+:mod:`fem_elastic.discretization`); the contraction above is done here by a
+vectorized kernel over all elements at once, because scikit-fem's generic
+``BilinearForm`` evaluates the form once per pair of local basis functions
+(144 pairs for P1, 900 for P2), re-evaluating the material tangent each time.
+:mod:`fem_elastic.skfem_forms` keeps that plain form assembly as the
+reference the tests compare this kernel with.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .discretization import Discretization
+from .errors import InvalidParameter
+from .materials.base import Material
+from .potential import Potential
+
+__all__ = ["ElasticBody", "ElasticPotential"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ElasticBody:
+    """A finite element body: a material on P1 or P2 tets.
+
+    Parameters
+    ----------
+    material : Material
+        e.g. ``fe.NeoHookean(E=1e6, nu=0.45)``.
+    order : {1, 2}
+        1 for linear tets (4 nodes), 2 for quadratic tets (10 nodes). Linear
+        tets lock in bending: prefer order 2 for thin, bending-dominated parts.
+
+    Examples
+    --------
+    >>> import fem_elastic as fe
+    >>> body = fe.ElasticBody(fe.NeoHookean(E=1e6, nu=0.45), order=2)
+    >>> body.order
+    2
+    """
+
+    material: Material
+    order: int = 1
+
+    def __post_init__(self):
+        if not isinstance(self.material, Material):
+            raise InvalidParameter(
+                f"ElasticBody needs a material such as fe.NeoHookean(E=..., nu=...), "
+                f"got {self.material!r}."
+            )
+        if self.order not in (1, 2):
+            raise InvalidParameter(
+                f"element order must be 1 (linear tets) or 2 (quadratic tets), got {self.order!r}."
+            )
+
+    def build(self, space: Discretization) -> "ElasticPotential":
+        """The body's energy on a discretization of matching order."""
+        return ElasticPotential(self.material, space)
+
+
+class ElasticPotential(Potential):
+    """Elastic strain energy of a body (J) as a function of the DOF positions x (m).
+
+    Parameters
+    ----------
+    material : Material
+        Provides psi, dpsi_dF, d2psi_dF2 and d2psi_dF2_psd.
+    space : Discretization
+        Basis, quadrature and DOF maps.
+    """
+
+    def __init__(self, material: Material, space: Discretization):
+        self.material = material
+        self.space = space
+
+    def F(self, x: np.ndarray) -> np.ndarray:
+        """Deformation gradient at the quadrature points, ``(3, 3, nelems, nqp)``."""
+        return self.space.deformation_gradient(x - self.space.X)
+
+    def energy_density(self, x: np.ndarray) -> np.ndarray:
+        """psi at the quadrature points (J/m^3), ``(nelems, nqp)``."""
+        return self.material.psi(self.F(x))
+
+    def energy(self, x: np.ndarray) -> float:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            psi = self.energy_density(x)
+        if not np.all(np.isfinite(psi)):
+            return np.inf  # inadmissible (inverted elements of a barrier material)
+        return float(np.sum(psi * self.space.dx))
+
+    def energy_roundoff(self) -> float:
+        """Absolute round-off of :meth:`energy` near the rest state (J).
+
+        psi is evaluated from F, whose entries carry an absolute error of
+        about eps, so each term of psi (of size ~ (mu + lam) |F|^2) carries
+        ~ eps (mu + lam); the energy differences a line search compares fall
+        below this long before the gradient does. Summed over the volume,
+        with a factor 3 for the three diagonal entries of F.
+        """
+        m = self.material
+        return 3.0 * np.finfo(float).eps * (m.mu + abs(m.lam)) * float(self.space.dx.sum())
+
+    def gradient(self, x: np.ndarray) -> np.ndarray:
+        return self._force(self.material.dpsi_dF(self.F(x)))
+
+    def hessian(self, x: np.ndarray, project: bool = False) -> sp.csr_matrix:
+        F = self.F(x)
+        C = self.material.d2psi_dF2_psd(F) if project else self.material.d2psi_dF2(F)
+        return self.space.pattern.assemble(self.element_stiffness(C))
+
+    def linearize(self, x: np.ndarray, project: bool = False):
+        F = self.F(x)
+        g = self._force(self.material.dpsi_dF(F))
+        C = self.material.d2psi_dF2_psd(F) if project else self.material.d2psi_dF2(F)
+        return g, self.space.pattern.assemble(self.element_stiffness(C))
+
+    # kernels -----------------------------------------------------------------
+    def _force(self, P: np.ndarray) -> np.ndarray:
+        """Assemble g_ai = sum_q P_ij dN_a,j dx."""
+        s = self.space
+        f_e = np.einsum("ijeq,ajeq,eq->aie", P, s.dN, s.dx, optimize=True)
+        return s.scatter(f_e)
+
+    def element_stiffness(self, C: np.ndarray) -> np.ndarray:
+        """Element matrices ``(3 nloc, 3 nloc, nelems)`` from C at the quadrature points.
+
+        K[a i, b k, e] = sum_q sum_jl dN[a, j] C[i, j, k, l] dN[b, l] dx, done
+        as two contractions, T = C . dN_b then K = dN_a . T, so the work is
+        3^4 nloc + 3^3 nloc^2 products per point instead of 3^4 nloc^2. Each
+        numpy call works on whole (3, 3, 3, nelems) slabs, written in place:
+        this measured 3x faster than ``np.einsum`` on the same contractions.
+        """
+        s = self.space
+        nl = s.nloc
+        ne, nq = s.dx.shape
+        T = np.empty((3, 3, 3, nl, ne))
+        tmp3 = np.empty((3, 3, 3, ne))
+        K = np.zeros((nl, 3, 3, nl, ne))  # K[a, i, k, b, e]
+        Ka = np.empty((3, 3, nl, ne))
+        tmpK = np.empty((3, 3, nl, ne))
+        for q in range(nq):
+            Cq = np.multiply(C[..., q], s.dx[:, q], order="C")  # fold the weight in once
+            dN = s.dN[..., q]  # (nloc, 3, ne)
+            for b in range(nl):
+                np.multiply(Cq[:, :, :, 0], dN[b, 0], out=T[:, :, :, b])
+                for l in (1, 2):
+                    np.multiply(Cq[:, :, :, l], dN[b, l], out=tmp3)
+                    T[:, :, :, b] += tmp3
+            for a in range(nl):
+                np.multiply(T[:, 0], dN[a, 0], out=Ka)
+                for j in (1, 2):
+                    np.multiply(T[:, j], dN[a, j], out=tmpK)
+                    Ka += tmpK
+                K[a] += Ka
+        return K.transpose(0, 1, 3, 2, 4).reshape(3 * nl, 3 * nl, ne)

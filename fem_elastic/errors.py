@@ -1,0 +1,83 @@
+"""Typed errors raised by fem_elastic.
+
+Every error is a subclass of :class:`FemElasticError`, so a caller can catch
+everything the library raises on purpose with one ``except`` clause, and
+anything else (a ``TypeError`` from a wrong call, say) still surfaces as a bug.
+Messages say what was wrong and what to do about it.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "FemElasticError",
+    "InvalidMesh",
+    "InvalidParameter",
+    "UnderConstrained",
+    "NotConverged",
+    "Diverged",
+]
+
+
+class FemElasticError(Exception):
+    """Base class of every error fem_elastic raises deliberately."""
+
+
+class InvalidMesh(FemElasticError, ValueError):
+    """The mesh cannot be used: degenerate, inverted, non-tetrahedral or malformed.
+
+    Attributes
+    ----------
+    elements : numpy.ndarray or None
+        Indices of the offending elements (or vertices, see the message), when
+        the problem is local to some of them.
+    """
+
+    def __init__(self, message: str, elements=None):
+        super().__init__(message)
+        self.elements = elements
+
+
+class InvalidParameter(FemElasticError, ValueError):
+    """A physical or numerical parameter is out of its admissible range."""
+
+
+class UnderConstrained(InvalidParameter):
+    """A static problem leaves rigid-body motion free, so it has no unique solution."""
+
+
+class NotConverged(FemElasticError, RuntimeError):
+    """An iterative solver stopped before meeting its tolerance.
+
+    Attributes
+    ----------
+    result : object
+        The solver's result object at the point it gave up (last iterate,
+        residual history), so nothing computed is lost.
+    """
+
+    def __init__(self, message: str, result=None):
+        super().__init__(message)
+        self.result = result
+
+
+class Diverged(FemElasticError, RuntimeError):
+    """A simulation blew up.
+
+    Attributes
+    ----------
+    step : int
+        Index of the step that failed.
+    time : float
+        Simulation time (s) at the start of the failed step.
+    reason : str
+        What was detected (non-finite state, energy growth, ...).
+    last_good_state : object
+        The last state that passed every check.
+    """
+
+    def __init__(self, message: str, step=None, time=None, reason=None, last_good_state=None):
+        super().__init__(message)
+        self.step = step
+        self.time = time
+        self.reason = reason
+        self.last_good_state = last_good_state

@@ -1,0 +1,176 @@
+"""Linear solvers for the Newton systems K dx = -g.
+
+Choose behaviour by passing an object: ``fe.DirectSolver()``,
+``fe.AMGSolver(rtol=1e-8)`` or ``fe.AutoSolver(max_direct_dofs=...)``, the
+default, which picks by size. Each has ``solve(A, b, near_null=None)``
+returning a :class:`LinearSolve` with the solution and statistics.
+
+Measured on this project's machines (88k-DOF elasticity system): scipy's
+default ``spsolve`` (COLAMD ordering) took 24 s and 3.3 GB; SuperLU with a
+symmetric ordering (``MMD_AT_PLUS_A``) halves that; smoothed-aggregation AMG
+(pyamg) given the six rigid-body modes and a ``splu`` coarse solver, as a
+CG preconditioner, solved it to 1e-8 in 1.3 s. pyamg's defaults were 5x
+slower, and its default ``pinv`` coarse solver does a dense SVD.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .errors import FemElasticError, InvalidParameter
+
+__all__ = ["LinearSolve", "DirectSolver", "AMGSolver", "AutoSolver", "SingularMatrix"]
+
+log = logging.getLogger(__name__)
+
+
+class SingularMatrix(FemElasticError, ArithmeticError):
+    """The linear system is singular to working precision."""
+
+
+@dataclass(frozen=True)
+class LinearSolve:
+    """One linear solve: solution and statistics.
+
+    Attributes
+    ----------
+    x : numpy.ndarray
+        The solution.
+    method : str
+        ``"direct"`` or ``"amg-cg"``.
+    iterations : int
+        Krylov iterations (0 for the direct solver).
+    residual : float
+        Relative residual ||b - A x|| / ||b||.
+    seconds : float
+        Wall time of setup and solve (s).
+    """
+
+    x: np.ndarray
+    method: str
+    iterations: int
+    residual: float
+    seconds: float
+
+
+def _relative_residual(A, x, b) -> float:
+    nb = np.linalg.norm(b)
+    return float(np.linalg.norm(b - A @ x) / nb) if nb > 0 else 0.0
+
+
+@dataclass(frozen=True)
+class DirectSolver:
+    """Sparse LU (SuperLU) with a symmetric fill-reducing ordering.
+
+    Examples
+    --------
+    >>> import numpy as np, scipy.sparse as sp
+    >>> A = sp.diags([4.0, 5.0, 6.0]).tocsr()
+    >>> DirectSolver().solve(A, np.array([4.0, 10.0, 18.0])).x
+    array([1., 2., 3.])
+    """
+
+    def solve(self, A, b, near_null=None) -> LinearSolve:
+        t0 = time.perf_counter()
+        try:
+            lu = spla.splu(
+                sp.csc_matrix(A),
+                permc_spec="MMD_AT_PLUS_A",
+                diag_pivot_thresh=0.0,
+                options=dict(SymmetricMode=True),
+            )
+        except RuntimeError as exc:  # SuperLU: "Factor is exactly singular"
+            raise SingularMatrix(
+                f"the stiffness matrix is singular ({exc}); some motion costs no energy: "
+                "check that the body is fixed (fixed=...) and that no element is degenerate."
+            ) from None
+        x = lu.solve(b)
+        if not np.all(np.isfinite(x)):
+            raise SingularMatrix("the direct solve produced non-finite values: the matrix is singular.")
+        return LinearSolve(x, "direct", 0, _relative_residual(A, x, b), time.perf_counter() - t0)
+
+
+@dataclass(frozen=True)
+class AMGSolver:
+    """Conjugate gradients preconditioned by smoothed-aggregation AMG (pyamg).
+
+    Needs the optional dependency pyamg (``pip install fem_elastic[fast]``).
+    The near-null space (the six rigid-body modes of elasticity) is passed as
+    ``near_null``; without it AMG converges several times slower.
+
+    Parameters
+    ----------
+    rtol : float
+        Relative residual at which CG stops. Newton only needs a direction
+        that is accurate relative to its own convergence, so 1e-8 is ample.
+    maxiter : int
+        Most CG iterations.
+    """
+
+    rtol: float = 1e-8
+    maxiter: int = 500
+
+    def __post_init__(self):
+        if not (0 < self.rtol < 1):
+            raise InvalidParameter(f"AMGSolver rtol must be in (0, 1), got {self.rtol!r}.")
+
+    def solve(self, A, b, near_null=None) -> LinearSolve:
+        try:
+            import pyamg
+        except ImportError:  # pragma: no cover - depends on the environment
+            raise InvalidParameter(
+                "AMGSolver needs pyamg: pip install 'fem_elastic[fast]' (or pip install pyamg), "
+                "or pass linear_solver=fe.DirectSolver()."
+            ) from None
+        t0 = time.perf_counter()
+        A = sp.csr_matrix(A)
+        B = None if near_null is None else np.ascontiguousarray(near_null, dtype=float)
+        ml = pyamg.smoothed_aggregation_solver(
+            A, B=B, symmetry="hermitian", coarse_solver="splu", max_coarse=500
+        )
+        residuals: list[float] = []
+        x = ml.solve(b, tol=self.rtol, accel="cg", maxiter=self.maxiter, residuals=residuals)
+        rel = _relative_residual(A, x, b)
+        if not np.all(np.isfinite(x)):
+            raise SingularMatrix("AMG-CG produced non-finite values: the matrix is singular or indefinite.")
+        if rel > self.rtol * 10:
+            log.warning("AMG-CG stopped at relative residual %.2e (asked %.1e)", rel, self.rtol)
+        return LinearSolve(x, "amg-cg", max(len(residuals) - 1, 0), rel, time.perf_counter() - t0)
+
+
+@dataclass(frozen=True)
+class AutoSolver:
+    """The direct solver for small systems, AMG-CG for large ones.
+
+    Parameters
+    ----------
+    max_direct_dofs : int
+        Largest system solved directly. Sparse LU's fill grows fast in 3-D; on
+        the project's machines AMG-CG overtakes it near 20k DOFs. Without
+        pyamg installed, every system is solved directly.
+    amg : AMGSolver
+        The iterative solver used above the threshold.
+    """
+
+    max_direct_dofs: int = 20_000
+    amg: AMGSolver = AMGSolver()
+
+    def solve(self, A, b, near_null=None) -> LinearSolve:
+        if A.shape[0] > self.max_direct_dofs and _have_pyamg():
+            return self.amg.solve(A, b, near_null)
+        return DirectSolver().solve(A, b, near_null)
+
+
+def _have_pyamg() -> bool:
+    try:
+        import pyamg  # noqa: F401
+    except ImportError:
+        log.info("pyamg is not installed: solving directly (pip install 'fem_elastic[fast]')")
+        return False
+    return True

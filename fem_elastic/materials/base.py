@@ -1,0 +1,216 @@
+"""Common base of the hyperelastic materials.
+
+Conventions (used by every material module)
+-------------------------------------------
+F : (3, 3, ...) deformation gradient, scikit-fem's layout: the two tensor
+    indices first, then any batch axes, typically ``(nelems, nqp)``.
+P : (3, 3, ...) first Piola-Kirchhoff stress, ``P = dpsi_dF``, in Pa.
+C : (3, 3, 3, 3, ...) the linearization ``C[i, j, k, l] = dP_ij / dF_kl`` (Pa).
+J : det F.
+psi : strain-energy density per unit reference volume (J/m^3 = Pa).
+mu, lam : Lame parameters (Pa), derived from Young's modulus E (Pa) and
+    Poisson's ratio nu (dimensionless).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InvalidParameter
+
+__all__ = ["Material", "lame_parameters"]
+
+
+def lame_parameters(E: float, nu: float) -> tuple[float, float]:
+    """Lame parameters from Young's modulus and Poisson's ratio.
+
+    Parameters
+    ----------
+    E : float
+        Young's modulus (Pa), > 0.
+    nu : float
+        Poisson's ratio, in (-1, 0.5).
+
+    Returns
+    -------
+    mu, lam : float
+        Shear modulus and first Lame parameter (Pa).
+
+    Examples
+    --------
+    >>> mu, lam = lame_parameters(1.0e6, 0.25)
+    >>> round(mu), round(lam)
+    (400000, 400000)
+    """
+    _check_E_nu(E, nu)
+    mu = E / (2.0 * (1.0 + nu))
+    lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+    return mu, lam
+
+
+def _check_E_nu(E, nu) -> None:
+    for name, value in (("E", E), ("nu", nu)):
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+            raise InvalidParameter(
+                f"{name} must be a real number, got {value!r} of type {type(value).__name__}."
+            )
+        if not math.isfinite(float(value)):
+            raise InvalidParameter(f"{name} must be finite, got {value!r}.")
+    if E <= 0:
+        raise InvalidParameter(
+            f"Young's modulus E must be > 0 Pa, got E = {E!r}. "
+            "Pass the stiffness in pascals, e.g. E=1e6 for a soft rubber, E=2e11 for steel."
+        )
+    if nu <= -1.0:
+        raise InvalidParameter(
+            f"Poisson's ratio nu must be > -1 (the bound of positive bulk modulus), got nu = {nu!r}."
+        )
+    if nu >= 0.5:
+        raise InvalidParameter(
+            f"Poisson's ratio nu must be < 0.5, got nu = {nu!r}: nu = 0.5 is exactly incompressible "
+            "and the first Lame parameter lam = E nu / ((1 + nu)(1 - 2 nu)) is infinite there. "
+            "Use a value such as 0.49 or 0.499 for a nearly incompressible solid."
+        )
+
+
+@dataclass(frozen=True)
+class Material:
+    """An isotropic hyperelastic material given by E (Pa) and nu.
+
+    Subclasses implement ``psi``, ``dpsi_dF`` and ``d2psi_dF2`` on
+    deformation gradients of shape ``(3, 3, ...)``, and ``d2psi_dF2_psd``,
+    the linearization projected to positive semi-definite at every point
+    (what Newton's method needs for a descent direction).
+
+    Parameters
+    ----------
+    E : float
+        Young's modulus (Pa), > 0.
+    nu : float
+        Poisson's ratio, -1 < nu < 0.5.
+    """
+
+    E: float
+    nu: float
+
+    def __post_init__(self):
+        _check_E_nu(self.E, self.nu)
+
+    @property
+    def mu(self) -> float:
+        """Shear modulus (Pa)."""
+        return lame_parameters(self.E, self.nu)[0]
+
+    @property
+    def lam(self) -> float:
+        """First Lame parameter (Pa)."""
+        return lame_parameters(self.E, self.nu)[1]
+
+    # The four methods every material provides -------------------------------
+    def psi(self, F: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        """Strain-energy density (J/m^3) at each point, shape ``F.shape[2:]``."""
+        raise NotImplementedError
+
+    def dpsi_dF(self, F: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        """First Piola-Kirchhoff stress P (Pa), shape ``F.shape``."""
+        raise NotImplementedError
+
+    def d2psi_dF2(self, F: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        """Linearization dP/dF (Pa), shape ``(3, 3) + F.shape``."""
+        raise NotImplementedError
+
+    def d2psi_dF2_psd(self, F: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        """dP/dF with negative eigenvalues (as a 9x9 map) clamped to zero."""
+        raise NotImplementedError
+
+
+# Shared helpers for the material modules -------------------------------------
+def _flat(F) -> tuple[np.ndarray, tuple[int, ...]]:
+    """F as (3, 3, N) float array, and its batch shape (any, possibly ())."""
+    F = np.asarray(F, dtype=float)
+    if F.ndim < 2 or F.shape[:2] != (3, 3):
+        raise InvalidParameter(
+            f"F must have shape (3, 3, ...) (scikit-fem's layout, tensor indices first), "
+            f"got shape {F.shape}."
+        )
+    batch = F.shape[2:]
+    return F.reshape(3, 3, int(np.prod(batch, dtype=np.int64))), batch
+
+
+def _right_cauchy_green(F: np.ndarray) -> np.ndarray:
+    """F^T F of (3, 3, N) F, as (3, 3, N)."""
+    A = np.empty_like(F)
+    for a in range(3):
+        for b in range(a, 3):
+            A[a, b] = F[0, a] * F[0, b] + F[1, a] * F[1, b] + F[2, a] * F[2, b]
+            A[b, a] = A[a, b]
+    return A
+
+
+def _cofactor(F: np.ndarray) -> np.ndarray:
+    """Cofactor matrix K = dJ/dF = J F^-T of (3, 3, N) F; J = sum(F[0] * K[0])."""
+    K = np.empty_like(F)
+    for i in range(3):
+        i1, i2 = (i + 1) % 3, (i + 2) % 3
+        for j in range(3):
+            j1, j2 = (j + 1) % 3, (j + 2) % 3
+            K[i, j] = F[i1, j1] * F[i2, j2] - F[i1, j2] * F[i2, j1]
+    return K
+
+
+def _det(F: np.ndarray, K: np.ndarray | None = None) -> np.ndarray:
+    """det F of (3, 3, N) F (using its cofactor K if given)."""
+    if K is None:
+        return (
+            F[0, 0] * (F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1])
+            - F[0, 1] * (F[1, 0] * F[2, 2] - F[1, 2] * F[2, 0])
+            + F[0, 2] * (F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0])
+        )
+    return F[0, 0] * K[0, 0] + F[0, 1] * K[0, 1] + F[0, 2] * K[0, 2]
+
+
+def _outer(A: np.ndarray, B: np.ndarray, scale=1.0) -> np.ndarray:
+    """(scale A)_ij B_kl of (3, 3, N) arrays, as a new (3, 3, 3, 3, N) array."""
+    return (scale * A)[:, :, None, None] * B[None, None]
+
+
+def _add_outer(C: np.ndarray, A: np.ndarray, B: np.ndarray, scale) -> None:
+    """C += scale A_ij B_kl, in place, without a (3, 3, 3, 3, N) temporary."""
+    sA = scale * A
+    for i in range(3):
+        for j in range(3):
+            C[i, j] += sA[i, j] * B
+
+
+def _add_identity_term(C: np.ndarray, value) -> None:
+    """C_ijkl += value delta_ik delta_jl (value a scalar or an (N,) slab)."""
+    for i in range(3):
+        for j in range(3):
+            C[i, j, i, j] += value
+
+
+_LEVI = np.zeros((3, 3, 3))
+_LEVI[0, 1, 2] = _LEVI[1, 2, 0] = _LEVI[2, 0, 1] = 1.0
+_LEVI[0, 2, 1] = _LEVI[2, 1, 0] = _LEVI[1, 0, 2] = -1.0
+# dK_ij/dF_kl = eps_ikn eps_jlq F_nq: 36 non-zero (i, j, k, l), each +-F_nq.
+_DCOF = [
+    (i, j, k, l, _LEVI[i, k, n] * _LEVI[j, l, q], n, q)
+    for i in range(3) for j in range(3) for k in range(3) for l in range(3)
+    for n in range(3) for q in range(3)
+    if _LEVI[i, k, n] * _LEVI[j, l, q] != 0.0
+]
+
+
+def _add_cofactor_derivative(C: np.ndarray, F: np.ndarray, scale: np.ndarray) -> None:
+    """C_ijkl += scale d(cof F)_ij / dF_kl = scale eps_ikn eps_jlq F_nq, in place."""
+    sF = {}
+    for i, j, k, l, sign, n, q in _DCOF:
+        if (n, q) not in sF:
+            sF[(n, q)] = scale * F[n, q]
+        if sign > 0:
+            C[i, j, k, l] += sF[(n, q)]
+        else:
+            C[i, j, k, l] -= sF[(n, q)]

@@ -1,0 +1,212 @@
+"""Compressible Neo-Hookean material (the classic form, e.g. Bonet and Wood).
+
+With ``I1 = tr(F^T F)``, ``J = det F`` and ``G = F^-T``,
+
+    psi = mu/2 (I1 - 3) - mu ln J + lam/2 (ln J)^2,
+    P   = mu (F - G) + lam ln J G,
+    C_ijkl = mu d_ik d_jl + lam G_ij G_kl + (mu - lam ln J) G_il G_kj.
+
+Only defined for ``J > 0``: ``psi`` is ``+inf`` for ``J <= 0`` (an inverted
+element is inadmissible, and a line search backs off), while ``P`` and ``C``
+are NaN there (no warning is raised). Use :class:`StableNeoHookean` where
+inversion must be recoverable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .base import Material, _add_identity_term, _cofactor, _det, _flat, _outer
+from .isotropic import PAIRS, project_psd
+
+__all__ = ["NeoHookean"]
+
+
+@dataclass(frozen=True)
+class NeoHookean(Material):
+    """Neo-Hookean material ``psi = mu/2 (I1 - 3) - mu ln J + lam/2 (ln J)^2``.
+
+    ``psi = +inf`` where ``J <= 0``; ``P`` and ``C`` (and the projection) are
+    NaN there.
+
+    Parameters
+    ----------
+    E : float
+        Young's modulus (Pa), > 0.
+    nu : float
+        Poisson's ratio, -1 < nu < 0.5.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> m = NeoHookean(E=1.0e6, nu=0.45)
+    >>> F = np.stack([np.eye(3), np.diag([1.0, 1.0, -1.0])], axis=-1)   # rest, inverted
+    >>> m.psi(F)
+    array([ 0., inf])
+    """
+
+    def _invariants(self, F):
+        K = _cofactor(F)
+        J = _det(F, K)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lnJ = np.log(J)
+            G = K / J
+        return J, lnJ, G
+
+    def psi(self, F: np.ndarray) -> np.ndarray:
+        """Strain-energy density (J/m^3); ``+inf`` where ``det F <= 0``.
+
+        Parameters
+        ----------
+        F : numpy.ndarray, shape (3, 3, ...)
+            Deformation gradients.
+
+        Returns
+        -------
+        psi : numpy.ndarray, shape F.shape[2:]
+            Energy density (J/m^3).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> float(NeoHookean(E=1.0, nu=0.3).psi(np.zeros((3, 3))))
+        inf
+        """
+        F, batch = _flat(F)
+        J = _det(F)
+        I1 = np.einsum("ijn,ijn->n", F, F)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lnJ = np.log(J)
+            out = 0.5 * self.mu * (I1 - 3.0) - self.mu * lnJ + 0.5 * self.lam * lnJ * lnJ
+        out[~(J > 0.0)] = np.inf
+        return out.reshape(batch)
+
+    def dpsi_dF(self, F: np.ndarray) -> np.ndarray:
+        """First Piola-Kirchhoff stress ``P = mu (F - F^-T) + lam ln J F^-T`` (Pa).
+
+        Parameters
+        ----------
+        F : numpy.ndarray, shape (3, 3, ...)
+            Deformation gradients, ``det F > 0`` (NaN otherwise).
+
+        Returns
+        -------
+        P : numpy.ndarray, shape F.shape
+            Stress (Pa).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> P = NeoHookean(E=1.0, nu=0.0).dpsi_dF(2.0 * np.eye(3))   # mu = 0.5, lam = 0
+        >>> float(P[0, 0])                                            # mu (2 - 1/2)
+        0.75
+        """
+        F, batch = _flat(F)
+        _, lnJ, G = self._invariants(F)
+        with np.errstate(invalid="ignore"):
+            P = self.mu * F + (self.lam * lnJ - self.mu) * G
+        return P.reshape((3, 3) + batch)
+
+    def d2psi_dF2(self, F: np.ndarray) -> np.ndarray:
+        """Analytic tangent ``mu d_ik d_jl + lam G_ij G_kl + (mu - lam ln J) G_il G_kj`` (Pa).
+
+        ``G = F^-T``; NaN where ``det F <= 0``.
+
+        Parameters
+        ----------
+        F : numpy.ndarray, shape (3, 3, ...)
+            Deformation gradients.
+
+        Returns
+        -------
+        C : numpy.ndarray, shape (3, 3, 3, 3) + F.shape[2:]
+            ``dP_ij/dF_kl`` (Pa).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> C = NeoHookean(E=1.0e6, nu=0.25).d2psi_dF2(np.eye(3))
+        >>> round(float(C[0, 0, 0, 0])), round(float(C[0, 1, 1, 0]))   # 2 mu + lam, mu
+        (1200000, 400000)
+        """
+        F, batch = _flat(F)
+        _, lnJ, G = self._invariants(F)
+        with np.errstate(invalid="ignore"):
+            C = _outer(G, G, self.lam)
+            c = self.mu - self.lam * lnJ
+            Gt = G.transpose(1, 0, 2)
+            for i in range(3):
+                for j in range(3):
+                    # c G_il G_kj as a (k, l) matrix: outer(G[:, j], G[i, :])
+                    C[i, j] += (c * Gt[j])[:, None] * G[i][None, :]
+        _add_identity_term(C, self.mu)
+        return C.reshape((3, 3, 3, 3) + batch)
+
+    def singular_value_hessian(self, s: np.ndarray):
+        """Eigensystem of the Hessian in terms of the signed singular values.
+
+        With ``g = lam ln J - mu`` (so ``psi_i = mu s_i + g / s_i``):
+        ``H_ab = d_ab (mu - g / s_a^2) + lam / (s_a s_b)``,
+        ``lam_twist = mu + g / (s_i s_j)``, ``lam_flip = mu - g / (s_i s_j)``.
+
+        Parameters
+        ----------
+        s : numpy.ndarray, shape (3, N)
+            Signed singular values, product ``J > 0``.
+
+        Returns
+        -------
+        d2psi_ds2 : numpy.ndarray, shape (3, 3, N)
+            Pa.
+        lam_twist, lam_flip : numpy.ndarray, shape (3, N)
+            Pa, rows for the pairs (0, 1), (0, 2), (1, 2).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> H, lt, lf = NeoHookean(E=1.0e6, nu=0.25).singular_value_hessian(np.ones((3, 1)))
+        >>> round(float(lt[0, 0])), round(float(lf[0, 0]))    # 0 and 2 mu at rest
+        (0, 800000)
+        """
+        mu, lam = self.mu, self.lam
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = lam * np.log(s[0] * s[1] * s[2]) - mu
+            inv = 1.0 / s
+        H = lam * inv[:, None] * inv[None, :]
+        for a in range(3):
+            H[a, a] += mu - g * inv[a] * inv[a]
+        lt, lf = np.empty_like(s), np.empty_like(s)
+        for row, (i, j, _k) in enumerate(PAIRS):
+            q = g * inv[i] * inv[j]
+            lt[row] = mu + q
+            lf[row] = mu - q
+        return H, lt, lf
+
+    def d2psi_dF2_psd(self, F: np.ndarray) -> np.ndarray:
+        """Tangent projected to positive semi-definite (negative eigenvalues set to 0).
+
+        Equal to :meth:`d2psi_dF2` where that is already PSD; undefined (NaN)
+        where ``det F <= 0``.
+
+        Parameters
+        ----------
+        F : numpy.ndarray, shape (3, 3, ...)
+            Deformation gradients.
+
+        Returns
+        -------
+        C : numpy.ndarray, shape (3, 3, 3, 3) + F.shape[2:]
+            Projected tangent (Pa).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> C = NeoHookean(E=1.0, nu=0.45).d2psi_dF2_psd(np.diag([0.5, 0.6, 0.7]))
+        >>> bool(np.linalg.eigvalsh(C.reshape(9, 9)).min() >= -1e-12)
+        True
+        """
+        Ff, batch = _flat(F)
+        C = project_psd(Ff, self.singular_value_hessian, self.d2psi_dF2)
+        return C.reshape((3, 3, 3, 3) + batch)

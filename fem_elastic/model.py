@@ -1,0 +1,231 @@
+"""The Model: everything about a simulated body that does not change in time.
+
+A model holds the mesh, the finite element space, the body's energy, the
+loads (only those the user asked for), the fixed DOFs and the mass. It is
+immutable; solvers and integrators read it and return new values.
+
+The total potential energy is the sum of the terms,
+
+    Pi(x) = E_body(x) + s * sum_loads E_load(x),
+
+with ``s`` a load factor in [0, 1] that the static solver's load stepping
+uses (1 is the full load).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+
+from .discretization import Discretization
+from .errors import InvalidParameter, UnderConstrained
+from .loads import gravity_load, traction_load
+from .mass import consistent_mass, lumped_mass
+
+__all__ = ["Model"]
+
+log = logging.getLogger(__name__)
+
+
+class Model:
+    """A body on a tet mesh with its material, loads and supports.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshTet
+        Reference configuration (m), e.g. ``fe.beam_mesh()``.
+    density : float
+        Mass density (kg/m^3), > 0.
+    body : ElasticBody
+        The body's energy, e.g. ``fe.ElasticBody(fe.NeoHookean(E=1e6, nu=0.45), order=2)``.
+    fixed : str, sequence of str, array of int or bool, or None
+        DOFs held at their reference position: a boundary name of the mesh
+        (``"left"``), several names, vertex indices, or a boolean mask over
+        vertices. With P2 tets, the edge nodes of a fixed boundary (or of an
+        edge whose two vertices are fixed) are fixed too.
+    gravity : array_like or None
+        Gravitational acceleration (m/s^2), e.g. ``(0, 0, -9.81)``. None
+        builds no gravity term at all.
+    traction : dict or None
+        ``{boundary name: traction vector (Pa)}``, dead loads per unit
+        reference area.
+
+    Examples
+    --------
+    >>> import fem_elastic as fe
+    >>> model = fe.Model(fe.beam_mesh(cells=(4, 1, 1)), density=1000.0,
+    ...                  body=fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3)),
+    ...                  fixed="left", gravity=(0, 0, -9.81))
+    >>> model.ndofs, len(model.loads)
+    (60, 1)
+    """
+
+    def __init__(self, mesh, density, body, fixed=None, gravity=None, traction=None):
+        from .mesh import validate_mesh
+
+        validate_mesh(mesh)
+        if isinstance(density, bool) or not isinstance(density, (int, float, np.number)):
+            raise InvalidParameter(f"density must be a number (kg/m^3), got {density!r}.")
+        if not math.isfinite(density) or density <= 0:
+            raise InvalidParameter(
+                f"density must be finite and > 0 kg/m^3, got {density!r} "
+                "(e.g. 1000.0 for rubber-like solids, 7850.0 for steel)."
+            )
+        if not hasattr(body, "build"):
+            raise InvalidParameter(
+                f"body must be e.g. fe.ElasticBody(fe.NeoHookean(E=..., nu=...)), got {body!r}."
+            )
+        self.mesh = mesh
+        self.density = float(density)
+        self.body = body
+        self.space = Discretization(mesh, getattr(body, "order", 1))
+        self.body_potential = body.build(self.space)
+        loads = []
+        if gravity is not None:
+            loads.append(gravity_load(self.space, self.density, gravity))
+        for name, t in (traction or {}).items():
+            loads.append(traction_load(self.space, name, t))
+        self.loads = tuple(loads)
+        self.potentials = (self.body_potential, *self.loads)
+        self.fixed_dofs = self._resolve_fixed(fixed)
+        free = np.ones(self.ndofs, dtype=bool)
+        free[self.fixed_dofs] = False
+        self.free = free
+        self.free.setflags(write=False)
+
+    # sizes and maps -----------------------------------------------------------
+    @property
+    def ndofs(self) -> int:
+        """Number of DOFs (3 per node; nodes include P2 edge nodes)."""
+        return self.space.ndofs
+
+    @property
+    def X(self) -> np.ndarray:
+        """Reference positions of the DOFs, ``(ndofs,)`` (m)."""
+        return self.space.X
+
+    def to_vertices(self, x: np.ndarray) -> np.ndarray:
+        """Vertex values ``(n_vertices, 3)`` of a flat DOF vector."""
+        return self.space.to_vertices(x)
+
+    @cached_property
+    def mass_matrix(self) -> sp.csr_matrix:
+        """Consistent mass matrix (kg), built on first use."""
+        return consistent_mass(self.space, self.density)
+
+    @cached_property
+    def lumped_mass(self) -> np.ndarray:
+        """Lumped mass per DOF (kg), built on first use."""
+        return lumped_mass(self.space, self.density)
+
+    # energy -------------------------------------------------------------------
+    def external_force(self, load_factor: float = 1.0) -> np.ndarray:
+        """Sum of the dead loads' nodal forces (N), ``(ndofs,)``."""
+        f = np.zeros(self.ndofs)
+        for load in self.loads:
+            f += load.force
+        return load_factor * f
+
+    def energy(self, x: np.ndarray, load_factor: float = 1.0) -> float:
+        """Total potential energy Pi(x) (J); +inf where x is inadmissible."""
+        e = self.body_potential.energy(x)
+        if not math.isfinite(e):
+            return math.inf
+        return e + load_factor * sum(load.energy(x) for load in self.loads)
+
+    def energy_roundoff(self, x: np.ndarray, load_factor: float = 1.0) -> float:
+        """Absolute round-off of Pi(x) (J), below which energy differences carry no information."""
+        eps = np.finfo(float).eps
+        terms = abs(self.body_potential.energy(x)) + sum(
+            abs(load_factor * load.energy(x)) for load in self.loads
+        )
+        return eps * terms + self.body_potential.energy_roundoff()
+
+    def gradient(self, x: np.ndarray, load_factor: float = 1.0) -> np.ndarray:
+        """dPi/dx (N), ``(ndofs,)``; the force on the DOFs is its negative."""
+        return self.body_potential.gradient(x) - self.external_force(load_factor)
+
+    def linearize(self, x: np.ndarray, load_factor: float = 1.0, project: bool = True):
+        """Gradient (N) and Hessian (N/m, CSR) of Pi at x.
+
+        ``project=True`` returns the per-point PSD projection of the tangent,
+        which makes Newton's step a descent direction.
+        """
+        g, H = self.body_potential.linearize(x, project=project)
+        return g - self.external_force(load_factor), H
+
+    # supports -----------------------------------------------------------------
+    def _resolve_fixed(self, fixed) -> np.ndarray:
+        mesh, space = self.mesh, self.space
+        nv = mesh.p.shape[1]
+        boundaries = mesh.boundaries or {}
+        if fixed is None:
+            return np.zeros(0, dtype=np.int64)
+        names = [fixed] if isinstance(fixed, str) else None
+        if names is None and len(fixed) > 0 and all(isinstance(f, str) for f in fixed):
+            names = list(fixed)
+        if names is not None:
+            dofs = []
+            for name in names:
+                if name not in boundaries:
+                    raise InvalidParameter(
+                        f"fixed names boundary {name!r}, which the mesh does not have; "
+                        f"its boundaries are {sorted(boundaries)}."
+                    )
+                dofs.append(space.basis.get_dofs(boundaries[name]).all())
+            return np.unique(np.concatenate(dofs)).astype(np.int64)
+        arr = np.asarray(fixed)
+        if arr.dtype == bool:
+            if arr.shape != (nv,):
+                raise InvalidParameter(
+                    f"a boolean fixed mask must have one entry per vertex ({nv}), got shape {arr.shape}."
+                )
+            mask = arr
+        elif np.issubdtype(arr.dtype, np.integer):
+            if arr.size and (arr.min() < 0 or arr.max() >= nv):
+                raise InvalidParameter(
+                    f"fixed vertex indices must lie in [0, {nv - 1}], got values from "
+                    f"{arr.min()} to {arr.max()}."
+                )
+            mask = np.zeros(nv, dtype=bool)
+            mask[arr] = True
+        else:
+            raise InvalidParameter(
+                "fixed must be a boundary name, a list of names, vertex indices or a boolean "
+                f"vertex mask; got {fixed!r}."
+            )
+        dofs = [space.vertex_dofs[mask].ravel()]
+        if space.order == 2:
+            edge_fixed = mask[mesh.edges].all(axis=0)
+            dofs.append(np.asarray(space.basis.edge_dofs)[:, edge_fixed].ravel())
+        return np.unique(np.concatenate(dofs)).astype(np.int64)
+
+    def check_supported(self) -> None:
+        """Raise :class:`UnderConstrained` if the fixed DOFs leave rigid-body motion free.
+
+        The six rigid-body modes restricted to the fixed DOFs must have rank
+        6; otherwise some translation or rotation costs no energy and a
+        static problem has no unique solution.
+        """
+        B = self.space.rigid_body_modes()
+        size = np.ptp(self.X.reshape(-1, 3), axis=0).max()
+        B[:, 3:] /= size  # rotations in the same units as translations
+        if self.fixed_dofs.size == 0:
+            raise UnderConstrained(
+                "the model fixes nothing, so it can translate and rotate freely and a static "
+                "problem has no unique solution. Fix a boundary, e.g. fe.Model(..., fixed='left'), "
+                "or vertex indices, or simulate the dynamics instead."
+            )
+        s = np.linalg.svd(B[self.fixed_dofs], compute_uv=False)
+        free_modes = int(np.sum(s < 1e-8 * s[0]))  # relative to the largest: round-off level
+        if free_modes:
+            raise UnderConstrained(
+                f"the fixed DOFs leave {free_modes} rigid-body mode(s) free (for instance, "
+                "fixing vertices on one line leaves the rotation about that line), so a static "
+                "problem has no unique solution. Fix a whole face (fixed='left') or at least "
+                "three vertices that are not on one line."
+            )

@@ -1,0 +1,247 @@
+"""Newton's method with backtracking line search, for energy minimisation.
+
+One solver serves statics (minimise the total potential energy) and, in the
+dynamics layer, implicit Euler (minimise the incremental potential). It sees
+only an objective with ``energy(x)`` and ``linearize(x) -> (g, H)``, the set
+of free DOFs, and a linear solver.
+
+Each iteration solves ``H dx = -g`` on the free DOFs, with H the (projected,
+so positive semi-definite) Hessian, then backtracks ``alpha = 1, 1/2, ...``
+until the Armijo condition ``Pi(x + alpha dx) <= Pi(x) + c alpha g . dx``
+holds. An energy of +inf (an inverted element of a barrier material) counts
+as "too far" and is backtracked from like any other failure, so no NaN ever
+enters the iterate.
+
+The projected Hessian is only an approximation of the true one: under
+compression the clamped eigenvalues (the rotational "twist" modes of every
+element) are exactly the soft modes of a bending structure, and Newton with
+the projected Hessian converges only linearly, sometimes slowly. So once a
+projected step is accepted in full (the iterate is in the basin where the
+quadratic model is good), the next iteration tries the exact Hessian; if
+that direction is not a descent direction or needs backtracking, it goes
+back to the projection. Near convergence the predicted decrease ``|g . dx|``
+falls to the round-off of Pi itself, where energy comparisons carry no
+information; the full Newton step is then taken (it is tiny, and Newton is
+in its quadratic regime there).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+from .linear_solvers import AutoSolver, SingularMatrix
+
+__all__ = ["NewtonResult", "newton_minimize"]
+
+log = logging.getLogger(__name__)
+
+_EPS = np.finfo(float).eps
+
+
+@dataclass
+class NewtonResult:
+    """The outcome of a Newton minimisation.
+
+    Attributes
+    ----------
+    x : numpy.ndarray
+        Last iterate (the minimiser when ``converged``), ``(ndofs,)``.
+    converged : bool
+    iterations : int
+        Newton iterations taken.
+    residual_history : list of float
+        ||g|| on the free DOFs (N) before each iteration and at the end.
+    line_search_cuts : int
+        Total step halvings.
+    linear_iterations : int
+        Total Krylov iterations of the linear solves (0 for a direct solver).
+    message : str
+        Why it stopped.
+    seconds : dict
+        Wall time (s) spent in ``"linearize"``, ``"solve"`` and ``"line_search"``.
+    """
+
+    x: np.ndarray
+    converged: bool
+    iterations: int
+    residual_history: list = field(default_factory=list)
+    line_search_cuts: int = 0
+    linear_iterations: int = 0
+    message: str = ""
+    seconds: dict = field(default_factory=lambda: {"linearize": 0.0, "solve": 0.0, "line_search": 0.0})
+
+
+def constrain(H: sp.csr_matrix, free: np.ndarray, pattern=None) -> sp.csr_matrix:
+    """Replace the rows and columns of fixed DOFs by the identity.
+
+    Keeps the matrix symmetric and its size, so the solution has dx = 0 on
+    fixed DOFs for a right-hand side that is 0 there. With the model's
+    ``pattern`` (the Hessian came from it) this edits the data array in place
+    of a sparse product.
+    """
+    fixed = ~free
+    if pattern is not None and H.indptr is pattern.indptr:
+        mask = pattern.entries_touching(fixed)
+        H.data[mask] = 0.0
+        H.data[pattern.diagonal_positions[fixed]] = 1.0
+        return H
+    D = sp.diags(free.astype(float))
+    return (D @ H @ D + sp.diags(fixed.astype(float))).tocsr()
+
+
+def newton_minimize(
+    energy: Callable[[np.ndarray], float],
+    linearize: Callable[[np.ndarray, bool], tuple],
+    x0: np.ndarray,
+    free: np.ndarray,
+    *,
+    rtol: float = 1e-8,
+    g_scale: float | None = None,
+    max_iter: int = 50,
+    linear_solver=None,
+    near_null: np.ndarray | None = None,
+    pattern=None,
+    energy_roundoff: Callable[[np.ndarray], float] | None = None,
+    armijo: float = 1e-4,
+    max_cuts: int = 30,
+    project: bool = True,
+) -> NewtonResult:
+    """Minimise ``energy`` from ``x0`` over the free DOFs.
+
+    Parameters
+    ----------
+    energy : callable
+        x -> Pi(x) (J), +inf where inadmissible.
+    linearize : callable
+        (x, project) -> (gradient (N), Hessian (N/m, sparse, symmetric)); with
+        ``project=True`` the Hessian must be positive semi-definite.
+    x0 : numpy.ndarray
+        Start, ``(ndofs,)``; fixed DOFs keep their values from it.
+    free : numpy.ndarray of bool
+        ``(ndofs,)``, True for unknowns.
+    rtol : float
+        Converged when ||g_free|| <= rtol * g_scale.
+    g_scale : float, optional
+        Force scale (N) of the problem, e.g. the norm of the external load.
+        Default: ||g_free(x0)||.
+    max_iter : int
+        Most Newton iterations.
+    linear_solver : object with ``solve(A, b, near_null)``
+        Default :class:`fem_elastic.AutoSolver`.
+    near_null : numpy.ndarray, optional
+        ``(ndofs, k)`` near-null space for AMG (rigid-body modes).
+    pattern : SparsityPattern, optional
+        The Hessian's CSR pattern, for cheap constraint application.
+    energy_roundoff : callable, optional
+        x -> the absolute round-off of Pi (J); when the predicted decrease
+        is below a few times this, the full step is taken. Default
+        ``eps * |Pi(x)|``.
+    armijo : float
+        Sufficient-decrease constant c of the Armijo condition.
+    max_cuts : int
+        Most step halvings per iteration before giving up.
+    project : bool
+        Use the PSD-projected Hessian away from the solution (and the exact
+        one near it, see the module notes). False always uses the exact one.
+
+    Returns
+    -------
+    NewtonResult
+    """
+    solver = linear_solver if linear_solver is not None else AutoSolver()
+    x = np.array(x0, dtype=float)
+    free = np.asarray(free, dtype=bool)
+    if near_null is not None:
+        near_null = near_null * free[:, None]
+    result = NewtonResult(x=x, converged=False, iterations=0)
+    e = energy(x)
+    if not math.isfinite(e):
+        result.message = "the starting point is inadmissible (energy is not finite)"
+        return result
+    exact = not project  # use the exact Hessian this iteration
+    for it in range(max_iter + 1):
+        t0 = time.perf_counter()
+        g, H = linearize(x, not exact)
+        result.seconds["linearize"] += time.perf_counter() - t0
+        g = np.where(free, g, 0.0)
+        gnorm = float(np.linalg.norm(g))
+        result.residual_history.append(gnorm)
+        if not math.isfinite(gnorm):
+            result.message = "the gradient is not finite"
+            return result
+        if g_scale is None:
+            g_scale = gnorm
+        if gnorm <= rtol * g_scale or gnorm == 0.0:
+            result.converged = True
+            result.message = f"||g|| = {gnorm:.3e} N <= {rtol:.1e} * {g_scale:.3e} N"
+            break
+        if it == max_iter:
+            result.message = f"no convergence in {max_iter} iterations (||g|| = {gnorm:.3e} N)"
+            break
+        dx, slope = _direction(solver, H, g, free, pattern, near_null, result)
+        if exact and project and not slope < 0:
+            # the exact Hessian is indefinite here: go back to the projection
+            log.debug("exact Hessian gave no descent direction; projecting")
+            exact = False
+            t0 = time.perf_counter()
+            _, H = linearize(x, True)
+            result.seconds["linearize"] += time.perf_counter() - t0
+            dx, slope = _direction(solver, H, g, free, pattern, near_null, result)
+        if not slope < 0:  # still no descent direction: steepest descent
+            log.debug("Newton direction is not a descent direction; using -g")
+            dx = -g * (np.linalg.norm(dx) / gnorm)
+            slope = float(g @ dx)
+        t0 = time.perf_counter()
+        noise = energy_roundoff(x) if energy_roundoff is not None else _EPS * abs(e)
+        roundoff = 0.5 * abs(slope) <= 10.0 * noise
+        alpha = 1.0
+        for cut in range(max_cuts + 1):
+            x_try = x + alpha * dx
+            e_try = energy(x_try)
+            if math.isfinite(e_try) and (
+                e_try <= e + armijo * alpha * slope or (roundoff and alpha == 1.0)
+            ):
+                break
+            alpha *= 0.5
+            result.line_search_cuts += 1
+        else:
+            result.seconds["line_search"] += time.perf_counter() - t0
+            result.message = (
+                f"line search failed: no decrease after {max_cuts} halvings "
+                f"(||g|| = {gnorm:.3e} N)"
+            )
+            result.iterations = it
+            break
+        result.seconds["line_search"] += time.perf_counter() - t0
+        if project:
+            exact = alpha == 1.0  # full step: in the quadratic basin; else project again
+        x, e = x_try, e_try
+        result.x = x
+        result.iterations = it + 1
+        log.debug("Newton %d: ||g|| = %.3e N, alpha = %g, Pi = %.9e J", it, gnorm, alpha, e)
+    result.x = x
+    return result
+
+
+def _direction(solver, H, g, free, pattern, near_null, result):
+    """Solve H dx = -g on the free DOFs; returns dx and the slope g . dx."""
+    t0 = time.perf_counter()
+    A = constrain(H, free, pattern)
+    try:
+        lin = solver.solve(A, -g, near_null)
+    except SingularMatrix:
+        # A PSD projection can leave a direction with no stiffness at all;
+        # a small diagonal shift restores a descent direction.
+        shift = 1e-8 * float(np.abs(A.diagonal()).max())
+        lin = solver.solve(A + shift * sp.identity(A.shape[0], format="csr"), -g, near_null)
+    result.seconds["solve"] += time.perf_counter() - t0
+    result.linear_iterations += lin.iterations
+    dx = np.where(free, lin.x, 0.0)
+    return dx, float(g @ dx)

@@ -1,0 +1,124 @@
+"""Tests of fem_elastic.io: load/save round trips and file errors."""
+
+import logging
+import os
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+
+from fem_elastic.errors import InvalidMesh, InvalidParameter
+from fem_elastic.io import load_mesh, save_mesh
+from fem_elastic.mesh import beam_mesh, signed_volumes, validate_mesh
+
+MESHES = Path(__file__).resolve().parent.parent / "meshes"
+
+
+def _triple_sets(mesh):
+    return {
+        name: {tuple(sorted(f)) for f in mesh.facets[:, facets].T.tolist()}
+        for name, facets in (mesh.boundaries or {}).items()
+    }
+
+
+@pytest.mark.parametrize("ext", ["vtu", "msh", "vtk"])
+def test_round_trip(tmp_path, ext):
+    mesh = beam_mesh(cells=(6, 2, 1))
+    back = load_mesh(save_mesh(mesh, tmp_path / f"beam.{ext}"))
+    # Both formats store coordinates with 17 significant digits (or binary): exact.
+    np.testing.assert_array_equal(back.p, mesh.p)
+    np.testing.assert_array_equal(back.t, mesh.t)
+    assert _triple_sets(back) == _triple_sets(mesh)
+    assert sorted(back.boundaries) == ["back", "bottom", "front", "left", "right", "top"]
+
+
+def test_save_is_atomic_and_overwrites(tmp_path):
+    path = tmp_path / "beam.vtu"
+    save_mesh(beam_mesh(cells=(2, 1, 1)), path)
+    save_mesh(beam_mesh(cells=(3, 1, 1)), path)
+    assert load_mesh(path).t.shape[1] == 6 * 3
+    assert [p.name for p in tmp_path.iterdir()] == ["beam.vtu"]  # no temp file left
+    umask = os.umask(0)
+    os.umask(umask)
+    # Same permissions as an ordinary open(path, "w"), not mkstemp's 0600.
+    assert path.stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+def test_file_with_only_triangles_is_rejected(tmp_path):
+    path = tmp_path / "surface.vtu"
+    points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
+    meshio.write(path, meshio.Mesh(points, [("triangle", np.array([[0, 1, 2], [0, 1, 3]]))]))
+    with pytest.raises(InvalidMesh, match="triangle") as err:
+        load_mesh(path)
+    assert "gmsh -3" in str(err.value)
+
+
+def test_missing_file(tmp_path):
+    path = tmp_path / "nope.vtu"
+    with pytest.raises(FileNotFoundError, match="nope.vtu"):
+        load_mesh(path)
+
+
+def test_unknown_extension(tmp_path):
+    path = tmp_path / "beam.xyz"
+    path.write_text("1 2 3\n")
+    with pytest.raises(InvalidParameter, match=r"\.vtu"):
+        load_mesh(path)
+    with pytest.raises(InvalidParameter, match="extension"):
+        save_mesh(beam_mesh(cells=(1, 1, 1)), path)
+
+
+def test_inverted_file_needs_reorient(tmp_path):
+    mesh = beam_mesh(cells=(2, 1, 1))
+    path = tmp_path / "flipped.vtu"
+    meshio.write(path, meshio.Mesh(mesh.p.T, [("tetra", mesh.t.T[:, [1, 0, 2, 3]])]))
+    with pytest.raises(InvalidMesh, match="reorient"):
+        load_mesh(path)
+    fixed = load_mesh(path, reorient=True)
+    np.testing.assert_allclose(signed_volumes(fixed), signed_volumes(mesh), rtol=0, atol=0)
+
+
+def test_tetra10_is_linearized_and_gmsh_groups_become_boundaries(tmp_path, caplog):
+    mesh = beam_mesh(cells=(2, 1, 1))
+    n = mesh.p.shape[1]
+    # Quadratic tets: corners, then 6 mid-edge nodes appended as new points.
+    pairs = [(0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3)]
+    t = mesh.t.T
+    mids = np.stack([(mesh.p.T[t[:, i]] + mesh.p.T[t[:, j]]) / 2 for i, j in pairs], axis=1)
+    mid_points = mids.reshape(-1, 3)
+    mid_index = n + np.arange(mid_points.shape[0]).reshape(-1, 6)
+    points = np.vstack([mesh.p.T, mid_points])
+    left = mesh.facets[:, mesh.boundaries["left"]].T
+    mio = meshio.Mesh(
+        points,
+        [("tetra10", np.hstack([t, mid_index])), ("triangle", left)],
+        cell_data={
+            "gmsh:physical": [np.zeros(len(t), int), np.full(len(left), 7)],
+            "gmsh:geometrical": [np.zeros(len(t), int), np.full(len(left), 7)],
+        },
+        field_data={"clamp": np.array([7, 2])},
+    )
+    path = tmp_path / "quadratic.msh"
+    meshio.write(path, mio, file_format="gmsh22", binary=False)
+    with caplog.at_level(logging.INFO, logger="fem_elastic.io"):
+        back = load_mesh(path)
+    assert "linearized" in caplog.text
+    np.testing.assert_array_equal(back.p, mesh.p)  # mid-edge nodes dropped, corners kept in order
+    np.testing.assert_array_equal(back.t, mesh.t)
+    assert _triple_sets(back) == {"clamp": _triple_sets(mesh)["left"]}
+
+
+@pytest.mark.parametrize("name, n_tets", [("beam", 480), ("blob", None)])
+def test_shipped_meshes_load_and_validate(name, n_tets):
+    mesh = validate_mesh(load_mesh(MESHES / f"{name}.vtu"))
+    assert "bottom" in mesh.boundaries and mesh.boundaries["bottom"].size > 0
+    if n_tets is not None:
+        assert mesh.t.shape[1] == n_tets
+    else:
+        assert 1000 <= mesh.t.shape[1] <= 5000  # "a few thousand tets at most"
+        # The blob rests on z = 0 and its "bottom" facets lie in a thin band above it.
+        assert mesh.p[2].min() == 0.0
+        z_bottom = mesh.p[2, mesh.facets[:, mesh.boundaries["bottom"]]]
+        assert z_bottom.max() < 0.1 * mesh.p[2].max()
+    assert (MESHES / f"{name}.vtu").stat().st_size < 300_000
