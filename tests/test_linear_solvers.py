@@ -1,0 +1,48 @@
+"""Direct and AMG-CG solvers on an elasticity system, and their failure modes."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import fem_elastic as fe
+from fem_elastic.newton import constrain
+
+
+@pytest.fixture(scope="module")
+def system():
+    model = fe.Model(fe.beam_mesh(cells=(30, 3, 3)), density=1000.0,
+                     body=fe.ElasticBody(fe.LinearElastic(E=1e9, nu=0.3)), fixed="left",
+                     gravity=(0, 0, -9.81))
+    _, K = model.linearize(model.X.copy())
+    A = constrain(K, model.free, model.space.pattern)
+    b = np.where(model.free, model.external_force(), 0.0)
+    B = model.space.rigid_body_modes() * model.free[:, None]
+    return A, b, B
+
+
+def test_direct_and_amg_agree(system):
+    A, b, B = system
+    d = fe.DirectSolver().solve(A, b)
+    a = fe.AMGSolver(rtol=1e-10).solve(A, b, near_null=B)
+    assert d.residual < 1e-10  # LU: residual at round-off times the condition growth
+    assert a.residual <= 1e-9  # CG stops at rtol=1e-10 in its preconditioned norm; allow 10x
+    assert a.iterations > 0 and a.method == "amg-cg"
+    # ||x - x*|| / ||x*|| <= cond(A) * residual; cond ~ 1e5 here, so ~1e-5 at worst
+    np.testing.assert_allclose(a.x, d.x, rtol=0, atol=1e-5 * np.abs(d.x).max())
+
+
+def test_auto_solver_switches_on_size(system):
+    A, b, B = system
+    assert fe.AutoSolver(max_direct_dofs=10).solve(A, b, B).method == "amg-cg"
+    assert fe.AutoSolver(max_direct_dofs=10**9).solve(A, b, B).method == "direct"
+
+
+def test_singular_matrix_is_a_typed_error():
+    A = sp.csr_matrix(np.array([[1.0, 1.0], [1.0, 1.0]]))
+    with pytest.raises(fe.SingularMatrix, match="singular"):
+        fe.DirectSolver().solve(A, np.array([1.0, 0.0]))
+
+
+def test_amg_rtol_validated():
+    with pytest.raises(fe.InvalidParameter, match="rtol"):
+        fe.AMGSolver(rtol=0.0)
