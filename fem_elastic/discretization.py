@@ -88,10 +88,24 @@ class SparsityPattern:
         idx = np.empty(9 * nnz_nodes, dtype=np.int64)
         for i in range(3):
             idx[((first + 3 * i * deg[node_row])[:, None] + i3[None, :]).ravel()] = block_cols.ravel()
-        self.indices = idx
+        # scipy stores CSR indices as int32 when they fit; matching it lets the
+        # matrices share these arrays (and lets callers recognise the pattern)
+        itype = np.int32 if 9 * nnz_nodes < 2**31 - 1 else np.int64
+        self.indices = idx.astype(itype)
+        self.indptr = self.indptr.astype(itype)
         self.shape = (ndofs, ndofs)
         self.nnz = idx.size
         self._row_of = np.repeat(np.arange(ndofs, dtype=np.int64), np.diff(self.indptr))
+        self._touching_cache = (None, None)
+
+    def owns(self, A) -> bool:
+        """Whether the sparse matrix ``A`` was assembled on this pattern."""
+        return (
+            getattr(A, "indptr", None) is not None
+            and A.shape == self.shape
+            and np.shares_memory(A.indptr, self.indptr)
+            and np.shares_memory(A.indices, self.indices)
+        )
 
     def assemble(self, element_matrices: np.ndarray) -> sp.csr_matrix:
         """Sum element matrices, shape ``(3 nloc, 3 nloc, nelems)``, into a CSR matrix."""
@@ -102,12 +116,18 @@ class SparsityPattern:
     def diagonal_positions(self) -> np.ndarray:
         """Position in the data array of each diagonal entry, ``(ndofs,)``."""
         n = self.shape[0]
-        keys = self._row_of * n + self.indices
+        keys = self._row_of * n + self.indices.astype(np.int64)
         return np.searchsorted(keys, np.arange(n, dtype=np.int64) * (n + 1))
 
     def entries_touching(self, dofs_mask: np.ndarray) -> np.ndarray:
-        """Boolean mask over the data array: entries whose row or column is in the mask."""
-        return dofs_mask[self._row_of] | dofs_mask[self.indices]
+        """Boolean mask over the data array: entries whose row or column is in the mask.
+
+        The last answer is kept: Newton asks with the same fixed DOFs every iteration.
+        """
+        key = hash(dofs_mask.tobytes())
+        if self._touching_cache[0] != key:
+            self._touching_cache = (key, dofs_mask[self._row_of] | dofs_mask[self.indices])
+        return self._touching_cache[1]
 
 
 class Discretization:

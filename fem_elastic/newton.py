@@ -87,7 +87,7 @@ def constrain(H: sp.csr_matrix, free: np.ndarray, pattern=None) -> sp.csr_matrix
     of a sparse product.
     """
     fixed = ~free
-    if pattern is not None and H.indptr is pattern.indptr:
+    if pattern is not None and pattern.owns(H):
         mask = pattern.entries_touching(fixed)
         H.data[mask] = 0.0
         H.data[pattern.diagonal_positions[fixed]] = 1.0
