@@ -144,19 +144,19 @@ class ElasticPotential(Potential):
         """Element matrices ``(3 nloc, 3 nloc, nelems)`` from C at the quadrature points.
 
         K[a i, b k, e] = sum_q sum_jl dN[a, j] C[i, j, k, l] dN[b, l] dx, done
-        as two contractions, T = C . dN_b then K = dN_a . T, so the work is
-        3^4 nloc + 3^3 nloc^2 products per point instead of 3^4 nloc^2. Each
-        numpy call works on whole (3, 3, 3, nelems) slabs, written in place:
-        this measured 3x faster than ``np.einsum`` on the same contractions.
+        as two contractions, T = C . dN_b then K_ab = dN_a . T_b, so the work
+        is 3^4 nloc + 3^3 nloc^2 products per point instead of 3^4 nloc^2;
+        only the blocks b >= a are computed and the others mirrored, since C
+        has major symmetry (C_ijkl = C_klij, so K_ba = K_ab^T). Each numpy
+        call works on whole slabs over all elements, written in place: this
+        measured 3x faster than ``np.einsum`` on the same contractions.
         """
         s = self.space
         nl = s.nloc
         ne, nq = s.dx.shape
-        T = np.empty((3, 3, 3, nl, ne))
+        T = np.empty((3, 3, 3, nl, ne))  # T[i, j, k, b]
         tmp3 = np.empty((3, 3, 3, ne))
-        K = np.zeros((nl, 3, 3, nl, ne))  # K[a, i, k, b, e]
-        Ka = np.empty((3, 3, nl, ne))
-        tmpK = np.empty((3, 3, nl, ne))
+        K = np.empty((nl, 3, nl, 3, ne))  # K[a, i, b, k]
         for q in range(nq):
             Cq = np.multiply(C[..., q], s.dx[:, q], order="C")  # fold the weight in once
             dN = s.dN[..., q]  # (nloc, 3, ne)
@@ -166,9 +166,13 @@ class ElasticPotential(Potential):
                     np.multiply(Cq[:, :, :, l], dN[b, l], out=tmp3)
                     T[:, :, :, b] += tmp3
             for a in range(nl):
-                np.multiply(T[:, 0], dN[a, 0], out=Ka)
-                for j in (1, 2):
-                    np.multiply(T[:, j], dN[a, j], out=tmpK)
-                    Ka += tmpK
-                K[a] += Ka
-        return K.transpose(0, 1, 3, 2, 4).reshape(3 * nl, 3 * nl, ne)
+                S = T[:, 0, :, a:] * dN[a, 0]  # S[i, k, b - a]
+                S += T[:, 1, :, a:] * dN[a, 1]
+                S += T[:, 2, :, a:] * dN[a, 2]
+                if q == 0:
+                    K[a, :, a:] = S.transpose(0, 2, 1, 3)
+                else:
+                    K[a, :, a:] += S.transpose(0, 2, 1, 3)
+        for a in range(nl - 1):  # K[b, k, a, i] = K[a, i, b, k] for b > a
+            K[a + 1 :, :, a] = K[a, :, a + 1 :].transpose(1, 2, 0, 3)
+        return K.reshape(3 * nl, 3 * nl, ne)
