@@ -24,7 +24,7 @@ from .errors import (
     UnderConstrained,
 )
 from .io import load_mesh, save_mesh
-from .linear_solvers import AMGSolver, AutoSolver, DirectSolver, SingularMatrix
+from .linear_solvers import AMGSolver, AutoSolver, DirectSolver, LinearSolverFailed, SingularMatrix
 from .materials import (
     Corotated,
     LinearElastic,
@@ -53,7 +53,7 @@ __all__ = [
     "AMGSolver", "AutoSolver", "Corotated", "DirectSolver", "Diverged", "ElasticBody",
     "ElasticPotential", "FemElasticError", "InvalidMesh", "InvalidParameter", "LinearElastic",
     "LinearPotential", "Material", "Model", "NeoHookean", "NotConverged", "Potential",
-    "RectangularCantilever", "SingularMatrix", "StableNeoHookean", "StaticResult", "StVK",
+    "LinearSolverFailed", "RectangularCantilever", "SingularMatrix", "StableNeoHookean", "StaticResult", "StVK",
     "UnderConstrained", "beam_mesh", "lame_parameters", "load_mesh", "mesh_from_arrays",
     "mesh_quality", "remove_unused_vertices", "reorient", "save_mesh", "signed_volumes",
     "solve_static", "validate_mesh",

@@ -119,6 +119,25 @@ class ElasticPotential(Potential):
         m = self.material
         return 3.0 * np.finfo(float).eps * (m.mu + abs(m.lam)) * float(self.space.dx.sum())
 
+    def gradient_roundoff(self) -> float:
+        """Norm of the round-off in :meth:`gradient` (N): the floor under ||g||.
+
+        The stress is evaluated from F = I + grad u, whose entries carry an
+        absolute error of about eps; the material subtracts I again (in
+        eps = sym F - I, in F - F^-T, ...), so each stress component carries
+        ~ eps (2 mu + lam) whatever the load. Through the force contraction
+        this gives eps (2 mu + lam) sum_q |dN_a| dx per DOF. For a stiff
+        material under a small load this floor lies above rtol ||f_ext||, and
+        no iterate can do better: Newton stops when it reaches it.
+        """
+        m = self.material
+        s = self.space
+        w = np.einsum("ajeq,eq->ae", np.abs(s.dN), s.dx)  # sum_j |dN_a,j| dx per element node
+        per_node = np.bincount(s.element_dofs[0::3].ravel() // 3, weights=w.ravel(),
+                               minlength=s.ndofs // 3)
+        eps = np.finfo(float).eps
+        return float(eps * (2.0 * m.mu + abs(m.lam)) * np.sqrt(3.0) * np.linalg.norm(per_node))
+
     def gradient(self, x: np.ndarray) -> np.ndarray:
         return self._force(self.material.dpsi_dF(self.F(x)))
 

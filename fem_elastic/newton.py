@@ -112,6 +112,7 @@ def newton_minimize(
     armijo: float = 1e-4,
     max_cuts: int = 30,
     project: bool = True,
+    g_floor: float = 0.0,
 ) -> NewtonResult:
     """Minimise ``energy`` from ``x0`` over the free DOFs.
 
@@ -150,6 +151,10 @@ def newton_minimize(
     project : bool
         Use the PSD-projected Hessian away from the solution (and the exact
         one near it, see the module notes). False always uses the exact one.
+    g_floor : float
+        Round-off level of ||g|| (N), below which no iterate can be told
+        apart from the solution; converged when ||g|| <= 10 g_floor as well
+        (a margin of 10 for the statistical spread of the round-off).
 
     Returns
     -------
@@ -178,9 +183,12 @@ def newton_minimize(
             return result
         if g_scale is None:
             g_scale = gnorm
-        if gnorm <= rtol * g_scale or gnorm == 0.0:
+        if gnorm <= max(rtol * g_scale, 10.0 * g_floor) or gnorm == 0.0:
             result.converged = True
-            result.message = f"||g|| = {gnorm:.3e} N <= {rtol:.1e} * {g_scale:.3e} N"
+            result.message = (
+                f"||g|| = {gnorm:.3e} N <= max({rtol:.1e} * {g_scale:.3e} N, "
+                f"10 x round-off {g_floor:.3e} N)"
+            )
             break
         if it == max_iter:
             result.message = f"no convergence in {max_iter} iterations (||g|| = {gnorm:.3e} N)"

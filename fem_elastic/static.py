@@ -87,7 +87,10 @@ def solve_static(
         Must fix enough DOFs to remove rigid-body motion.
     rtol : float
         Newton stops when the out-of-balance force on the free DOFs is below
-        ``rtol`` times the norm of the external load (N).
+        ``rtol`` times the norm of the external load (N), or below ten times
+        its round-off floor (see ``ElasticPotential.gradient_roundoff``),
+        whichever is larger: a stiff body under a small load cannot be
+        resolved below that floor.
     max_iter : int
         Most Newton iterations per load step.
     linear_solver : object, optional
@@ -138,6 +141,7 @@ def solve_static(
     free = model.free
     g_scale_full = float(np.linalg.norm(f_full[free]))
     near_null = model.space.rigid_body_modes()
+    g_floor = model.body_potential.gradient_roundoff()
     pattern = model.space.pattern
     x = model.X.copy()
     total = StaticResult(
@@ -164,6 +168,7 @@ def solve_static(
             pattern=pattern,
             energy_roundoff=lambda y: model.energy_roundoff(y, target),
             project=project,
+            g_floor=g_floor,
         )
         total.iterations += res.iterations
         total.residual_history.extend(res.residual_history)

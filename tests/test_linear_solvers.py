@@ -46,3 +46,13 @@ def test_singular_matrix_is_a_typed_error():
 def test_amg_rtol_validated():
     with pytest.raises(fe.InvalidParameter, match="rtol"):
         fe.AMGSolver(rtol=0.0)
+
+
+def test_amg_failure_is_reported_and_auto_falls_back_to_direct(system):
+    A, b, B = system
+    starved = fe.AMGSolver(rtol=1e-10, maxiter=2)  # two CG iterations cannot reach 1e-10
+    with pytest.raises(fe.LinearSolverFailed, match="DirectSolver") as info:
+        starved.solve(A, b, near_null=B)
+    assert info.value.result.iterations == 2
+    res = fe.AutoSolver(max_direct_dofs=10, amg=starved).solve(A, b, B)
+    assert res.method == "direct" and res.residual < 1e-10
