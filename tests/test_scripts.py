@@ -1,0 +1,39 @@
+"""The scripts in scripts/ keep working: run as a user runs them, on small inputs."""
+
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import fem_elastic as fe
+
+SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
+MESHES = SCRIPTS.parent / "meshes"
+
+
+def test_bench_assembly_quick_prints_its_ratios():
+    r = subprocess.run(
+        [sys.executable, str(SCRIPTS / "bench_assembly.py"), "--quick", "--no-direct", "--repeats", "1"],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert r.returncode == 0, r.stderr
+    for line in ("scikit-fem forms / ours", "projection overhead", "assembly share"):
+        assert line in r.stdout
+    # the benchmark checks its own two assemblies against each other; both to round-off
+    diff = r.stdout.split("max rel. difference:")[1]
+    res, tan = (float(v.split()[-1]) for v in diff.split(","))
+    assert res < 1e-10 and tan < 1e-10
+
+
+def test_shipped_meshes_are_what_make_meshes_builds():
+    spec = importlib.util.spec_from_file_location("make_meshes", SCRIPTS / "make_meshes.py")
+    make_meshes = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(make_meshes)
+    for name, built in (("blob", make_meshes.blob_mesh()), ("beam", fe.beam_mesh())):
+        shipped = fe.load_mesh(MESHES / f"{name}.vtu")
+        np.testing.assert_array_equal(shipped.t, built.t)
+        # VTU stores float64 points as written: equal up to the ascii/binary round trip
+        np.testing.assert_allclose(shipped.p, built.p, rtol=0, atol=1e-15)
+        assert set(shipped.boundaries) == set(built.boundaries)
