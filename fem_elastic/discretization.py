@@ -23,13 +23,26 @@ from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
-from skfem import Basis, ElementTetP1, ElementTetP2, ElementVector, MeshTet
+from skfem import Basis, BilinearForm, ElementTetP1, ElementTetP2, ElementVector, MeshTet
 
 from .errors import InvalidMesh, InvalidParameter
 
-__all__ = ["Discretization", "SparsityPattern"]
+__all__ = ["Discretization", "SparsityPattern", "check_order"]
 
 _ELEMENTS = {1: ElementTetP1, 2: ElementTetP2}
+
+
+def check_order(order) -> None:
+    """Raise :class:`InvalidParameter` unless ``order`` is 1 or 2."""
+    if order not in _ELEMENTS or isinstance(order, bool):
+        raise InvalidParameter(
+            f"element order must be 1 (linear tets) or 2 (quadratic tets), got {order!r}."
+        )
+
+
+@BilinearForm
+def _unit_mass(u, v, w):
+    return u * v
 
 
 class SparsityPattern:
@@ -149,10 +162,7 @@ class Discretization:
     """
 
     def __init__(self, mesh: MeshTet, order: int = 1):
-        if order not in _ELEMENTS:
-            raise InvalidParameter(
-                f"element order must be 1 (linear tets) or 2 (quadratic tets), got {order!r}."
-            )
+        check_order(order)
         if not isinstance(mesh, MeshTet):
             raise InvalidMesh(
                 f"a tetrahedral mesh (skfem.MeshTet) is needed, got {type(mesh).__name__}; "
@@ -160,23 +170,53 @@ class Discretization:
             )
         self.mesh = mesh
         self.order = order
-        scalar = _ELEMENTS[order]()
+        self.element = _ELEMENTS[order]()
         # Quadrature exact for the stiffness of linear elasticity: degree 2 (order - 1).
         self.intorder = 2 * (order - 1) if order > 1 else 1
-        self.basis = Basis(mesh, ElementVector(scalar), intorder=self.intorder)
-        # The mass matrix integrates a degree-2*order polynomial; its own quadrature.
-        self.mass_basis = Basis(mesh, ElementVector(scalar), intorder=2 * order)
-        sbasis = Basis(mesh, scalar, quadrature=self.basis.quadrature)
-        self.dN = np.stack([phi[0].grad for phi in sbasis.basis])  # (nloc, 3, ne, nq)
-        self.dx = np.asarray(self.basis.dx)  # (ne, nq)
-        self.element_dofs = np.asarray(self.basis.element_dofs, dtype=np.int64)
-        self.ndofs = int(self.basis.N)
-        dofs = np.arange(self.ndofs)
-        self.X = np.asarray(self.basis.doflocs)[dofs % 3, dofs].copy()
-        self.vertex_dofs = np.asarray(self.basis.nodal_dofs, dtype=np.int64).T  # (nverts, 3)
+        # Only scalar bases are built: the three displacement components share
+        # them, and a vector basis would evaluate 3x the functions (and 9x the
+        # gradients) at every quadrature point for nothing. scikit-fem's vector
+        # DOF numbering is 3 * scalar DOF + component, which is reproduced here.
+        self.scalar_basis = Basis(mesh, self.element, intorder=self.intorder)
+        sb = self.scalar_basis
+        self.dN = np.stack([phi[0].grad for phi in sb.basis])  # (nloc, 3, ne, nq)
+        self.dx = np.asarray(sb.dx)  # (ne, nq)
+        # (nloc, ne) nodes -> (nloc, 3, ne) DOFs -> (3 nloc, ne), local DOF 3 a + i
+        self.element_dofs = np.moveaxis(self.vector_dofs(sb.element_dofs), -1, 1).reshape(
+            -1, mesh.t.shape[1]
+        )
+        self.ndofs = 3 * int(sb.N)
+        self.X = np.asarray(sb.doflocs, dtype=float).T.ravel()
+        self.vertex_dofs = self.vector_dofs(np.asarray(sb.nodal_dofs[0]))  # (nverts, 3)
         # doflocs maps reference nodes through each element and can be a few
         # ulps off; at the vertices take the mesh's own coordinates.
         self.X[self.vertex_dofs] = mesh.p.T
+        for arr in (self.X, self.element_dofs, self.vertex_dofs, self.dN, self.dx):
+            arr.setflags(write=False)
+
+    @staticmethod
+    def vector_dofs(nodes: np.ndarray) -> np.ndarray:
+        """The three DOFs ``3 n + i`` of scalar nodes n, shape ``nodes.shape + (3,)``."""
+        nodes = np.asarray(nodes, dtype=np.int64)
+        return 3 * nodes[..., None] + np.arange(3)
+
+    @cached_property
+    def basis(self) -> Basis:
+        """scikit-fem's vector basis on the same quadrature (for form assembly; built on first use)."""
+        return Basis(self.mesh, ElementVector(self.element), quadrature=self.scalar_basis.quadrature)
+
+    @cached_property
+    def unit_mass(self) -> sp.csr_matrix:
+        """Scalar consistent mass at unit density, ``int N_a N_b dV`` (m^3), on first use.
+
+        Its quadrature (degree 2 order) integrates the product exactly.
+        """
+        mb = Basis(self.mesh, self.element, intorder=2 * self.order)
+        return _unit_mass.assemble(mb).tocsr()
+
+    def node_dofs(self, nodes: np.ndarray) -> np.ndarray:
+        """Flat, sorted DOFs of the given scalar nodes (vertices and, for P2, edge nodes)."""
+        return np.sort(self.vector_dofs(np.ravel(nodes)).ravel())
 
     @property
     def nloc(self) -> int:

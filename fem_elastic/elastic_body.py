@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .discretization import Discretization
+from .discretization import Discretization, check_order
 from .errors import InvalidParameter
 from .materials.base import Material
 from .potential import Potential
@@ -67,10 +67,7 @@ class ElasticBody:
                 f"ElasticBody needs a material such as fe.NeoHookean(E=..., nu=...), "
                 f"got {self.material!r}."
             )
-        if self.order not in (1, 2):
-            raise InvalidParameter(
-                f"element order must be 1 (linear tets) or 2 (quadratic tets), got {self.order!r}."
-            )
+        check_order(self.order)
 
     def build(self, space: Discretization) -> "ElasticPotential":
         """The body's energy on a discretization of matching order."""

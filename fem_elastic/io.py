@@ -37,8 +37,13 @@ logger = logging.getLogger(__name__)
 _BOUNDARY_FORMATS = {"vtu", "vtk", "xdmf", "gmsh", "gmsh22"}
 
 
-def _file_format(path: Path) -> tuple[str, str]:
-    """Return (extension, meshio format name) of ``path``, or raise InvalidParameter."""
+def _file_format(path: Path) -> tuple[str, str, str]:
+    """Return (extension, format to read/write, format meshio lists first) of ``path``.
+
+    The two formats differ only for ``.msh``: meshio lists ansys before gmsh, but
+    gmsh is what ``.msh`` almost always means. Raise InvalidParameter for an
+    extension meshio does not know.
+    """
     import meshio
 
     table = meshio.extension_to_filetypes
@@ -50,16 +55,8 @@ def _file_format(path: Path) -> tuple[str, str]:
             f"{', '.join(sorted(table))}; use .vtu (or gmsh's .msh) for tet meshes."
         )
     ext = max(matches, key=len)
-    # meshio lists ansys before gmsh for .msh; gmsh is what .msh almost always means.
-    return ext, "gmsh" if ext == ".msh" else table[ext][0]
-
-
-def _file_format_listed_first(path: Path) -> str:
-    import meshio
-
-    name = path.name.lower()
-    ext = max((e for e in meshio.extension_to_filetypes if name.endswith(e)), key=len)
-    return meshio.extension_to_filetypes[ext][0]
+    listed_first = table[ext][0]
+    return ext, "gmsh" if ext == ".msh" else listed_first, listed_first
 
 
 def _triples_from_skfem_data(mio, tet_blocks, points, tets) -> dict[str, np.ndarray]:
@@ -113,7 +110,9 @@ def load_mesh(path, *, reorient: bool = False, validate: bool = True) -> MeshTet
 
     The "tetra" cells form the mesh. Quadratic "tetra10" cells are reduced to
     their 4 corners (the geometry is linearized and an INFO message logged).
-    Other cells are ignored, except named or tagged boundary triangles
+    Any other volume cell (hexahedron, wedge, pyramid, ...) is an error rather
+    than being dropped. Lower-dimensional cells (triangles, lines, vertices) are
+    ignored, except named or tagged boundary triangles
     (gmsh physical groups, meshio cell sets, or what :func:`save_mesh` wrote),
     which become named boundaries. Vertices used by no tet (gmsh geometry
     points, the mid-edge nodes of tetra10) are dropped, so vertex numbering may
@@ -144,7 +143,8 @@ def load_mesh(path, *, reorient: bool = False, validate: bool = True) -> MeshTet
     InvalidParameter
         The extension is not one meshio knows.
     InvalidMesh
-        The file has no tetrahedra, cannot be parsed, or fails validation.
+        The file has no tetrahedra, holds non-tetrahedral volume cells
+        (hexahedra, wedges, pyramids, ...), cannot be parsed, or fails validation.
 
     Examples
     --------
@@ -161,12 +161,12 @@ def load_mesh(path, *, reorient: bool = False, validate: bool = True) -> MeshTet
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(errno.ENOENT, "Mesh file not found", str(path))
-    _, file_format = _file_format(path)  # unknown extension -> InvalidParameter
+    _, file_format, listed_first = _file_format(path)  # unknown extension -> InvalidParameter
     try:
         try:
             mio = meshio.read(path, file_format=file_format)
         except meshio.ReadError:
-            if file_format == _file_format_listed_first(path):
+            if file_format == listed_first:
                 raise
             mio = meshio.read(path)  # e.g. an ANSYS .msh: let meshio try every candidate
     except meshio.ReadError as err:
@@ -175,6 +175,24 @@ def load_mesh(path, *, reorient: bool = False, validate: bool = True) -> MeshTet
     types = [block.type for block in mio.cells]
     linear = [i for i, t in enumerate(types) if t == "tetra"]
     quadratic = [i for i, t in enumerate(types) if t == "tetra10"]
+    counts: dict[str, int] = {}
+    other_volume = []
+    for block in mio.cells:
+        counts[block.type] = counts.get(block.type, 0) + len(block.data)
+        dim = getattr(block, "dim", None)
+        if dim is None:
+            dim = meshio.topological_dimension.get(block.type, 0)
+        if dim == 3 and block.type not in ("tetra", "tetra10", *other_volume):
+            other_volume.append(block.type)
+    if other_volume:
+        found = ", ".join(f"{n} {t}" for t, n in sorted(counts.items()))
+        raise InvalidMesh(
+            f"{str(path)!r} holds non-tetrahedral volume cells "
+            f"({', '.join(sorted(other_volume))}); cells found: {found}. fem_elastic "
+            "solves on tet meshes only: tetrahedralize the volume (e.g. gmsh -3 or "
+            "TetGen), or split the hexahedra (wedges, pyramids) into tets, and export "
+            "tetra cells only."
+        )
     if not linear and not quadratic:
         raise InvalidMesh(
             f"{str(path)!r} holds no tetrahedra (cell types found: "
@@ -274,7 +292,7 @@ def save_mesh(mesh: MeshTet, path) -> Path:
             f"save_mesh writes linear tet meshes (skfem.MeshTet), got {type(mesh).__name__}."
         )
     path = Path(path)
-    ext, file_format = _file_format(path)
+    ext, file_format, _ = _file_format(path)
     options = {}
     if file_format.startswith("gmsh"):
         mio = _gmsh_meshio(mesh)

@@ -135,7 +135,7 @@ class AMGSolver:
                 "or pass linear_solver=fe.DirectSolver()."
             ) from None
         t0 = time.perf_counter()
-        A = sp.csr_matrix(A)
+        A = sp.csr_matrix(A, copy=True)  # pyamg may edit A's structure; never the caller's
         B = None if near_null is None else np.ascontiguousarray(near_null, dtype=float)
         # The prolongation smoother's Jacobi weight needs a bound on the spectral
         # radius of D^-1 A. pyamg's default ("diagonal") and "block" weightings

@@ -2,18 +2,18 @@
 
 Both are dead loads (their direction and magnitude do not follow the
 deformation), so each is a linear potential ``E(x) = -f . (x - X)`` with a
-constant nodal force vector ``f`` (N) integrated once through scikit-fem.
+constant nodal force vector ``f`` (N) integrated once through scikit-fem: a
+constant load density times the integral of each scalar shape function.
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 from skfem import FacetBasis, LinearForm
 
 from .discretization import Discretization
 from .errors import InvalidParameter
+from .mesh import boundary_facets
 from .potential import LinearPotential
 
 __all__ = ["gravity_load", "traction_load", "as_vector3"]
@@ -35,10 +35,8 @@ def as_vector3(value, name: str, unit: str) -> np.ndarray:
 
 
 @LinearForm
-def _vector_density(v, w):
-    # w.g: the load per unit volume (N/m^3) or area (N/m^2), shape (3, 1, 1) so that
-    # scikit-fem broadcasts it instead of reading it as a DOF vector
-    return v[0] * w.g[0] + v[1] * w.g[1] + v[2] * w.g[2]
+def _shape_integral(v, w):
+    return v  # int N_a over the domain or the facets
 
 
 def gravity_load(space: Discretization, density: float, g) -> LinearPotential:
@@ -58,8 +56,9 @@ def gravity_load(space: Discretization, density: float, g) -> LinearPotential:
         ``E(x) = -f . (x - X)``; its ``force`` sums to ``rho g V``.
     """
     g = as_vector3(g, "gravity", "m/s^2")
-    f = _vector_density.assemble(space.mass_basis, g=(density * g)[:, None, None])
-    return LinearPotential(f, space.X)
+    # int rho g N_a dV = rho g sum_b M_ab, by the partition of unity sum_b N_b = 1
+    node_volume = np.asarray(space.unit_mass.sum(axis=1)).ravel()  # int N_a dV (m^3)
+    return LinearPotential(np.outer(density * node_volume, g).ravel(), space.X)
 
 
 def traction_load(space: Discretization, boundary: str, t) -> LinearPotential:
@@ -77,19 +76,7 @@ def traction_load(space: Discretization, boundary: str, t) -> LinearPotential:
         Traction vector (Pa = N/m^2).
     """
     t = as_vector3(t, f"traction on {boundary!r}", "Pa")
-    boundaries = space.mesh.boundaries or {}
-    if boundary not in boundaries:
-        raise InvalidParameter(
-            f"traction names boundary {boundary!r}, which the mesh does not have; "
-            f"its boundaries are {sorted(boundaries)}."
-        )
-    fb = FacetBasis(
-        space.mesh,
-        space.basis.elem,
-        facets=boundaries[boundary],
-        intorder=max(2 * space.order, 2),
-    )
-    f = _vector_density.assemble(fb, g=t[:, None, None])
-    if not math.isfinite(float(np.sum(f))):  # pragma: no cover - guarded by as_vector3
-        raise InvalidParameter(f"traction on {boundary!r} produced non-finite forces.")
-    return LinearPotential(f, space.X)
+    facets = boundary_facets(space.mesh, boundary, what="traction")
+    fb = FacetBasis(space.mesh, space.element, facets=facets, intorder=2 * space.order)
+    node_area = _shape_integral.assemble(fb)  # int_Gamma N_a dA (m^2), scalar nodes
+    return LinearPotential(np.outer(node_area, t).ravel(), space.X)

@@ -39,6 +39,7 @@ __all__ = [
     "reorient",
     "remove_unused_vertices",
     "mesh_quality",
+    "boundary_facets",
 ]
 
 logger = logging.getLogger(__name__)
@@ -188,6 +189,50 @@ def _attach_boundaries(mesh: MeshTet, triples: Mapping, missing: str = "raise") 
     return mesh.with_boundaries(boundaries)
 
 
+def boundary_facets(mesh: MeshTet, name: str, *, what: str) -> np.ndarray:
+    """Facet indices of the named boundary ``name`` of ``mesh``.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshTet
+        Mesh with named boundaries (``mesh.boundaries``).
+    name : str
+        Boundary name.
+    what : str
+        What refers to the boundary (e.g. ``"Load 'traction'"``), to start the
+        error message with.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``mesh.boundaries[name]``, a non-empty array of facet indices.
+
+    Raises
+    ------
+    InvalidParameter
+        The mesh has no boundary ``name``, or it has no facets.
+
+    Examples
+    --------
+    >>> import fem_elastic.mesh as fm
+    >>> fm.boundary_facets(fm.beam_mesh(), "left", what="Support").size
+    8
+    """
+    boundaries = mesh.boundaries or {}
+    if name not in boundaries:
+        raise InvalidParameter(
+            f"{what} names boundary {name!r}, which the mesh does not have; its "
+            f"boundaries are {sorted(boundaries)}."
+        )
+    facets = np.asarray(boundaries[name])
+    if facets.size == 0:
+        raise InvalidParameter(
+            f"{what} names boundary {name!r}, which is empty (no facets), so it can "
+            "carry no load and fix nothing. Check how the boundary was selected."
+        )
+    return facets
+
+
 def signed_volumes(mesh: MeshTet) -> np.ndarray:
     """Signed volume of every tetrahedron.
 
@@ -259,8 +304,9 @@ def validate_mesh(mesh, *, degenerate_tol: float = DEGENERATE_TOL):
     if isinstance(mesh, MeshTet2):
         raise InvalidMesh(
             "A quadratic MeshTet2 was given, but fem_elastic meshes have linear "
-            "geometry. Use fem_elastic.MeshTet(mesh.p, mesh.t) for the linear mesh "
-            "(quadratic fields come from the element order, not the mesh)."
+            "geometry. Use skfem.MeshTet(mesh.p, mesh.t) for the linear mesh, or build "
+            "one with fem_elastic.load_mesh / fem_elastic.beam_mesh (quadratic fields "
+            "come from the element order, not the mesh)."
         )
     if not isinstance(mesh, MeshTet):
         raise InvalidMesh(

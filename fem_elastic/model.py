@@ -25,6 +25,7 @@ from .discretization import Discretization
 from .errors import InvalidParameter, UnderConstrained
 from .loads import gravity_load, traction_load
 from .mass import consistent_mass, lumped_mass
+from .mesh import boundary_facets, validate_mesh
 
 __all__ = ["Model"]
 
@@ -65,8 +66,6 @@ class Model:
     """
 
     def __init__(self, mesh, density, body, fixed=None, gravity=None, traction=None):
-        from .mesh import validate_mesh
-
         validate_mesh(mesh)
         if isinstance(density, bool) or not isinstance(density, (int, float, np.number)):
             raise InvalidParameter(f"density must be a number (kg/m^3), got {density!r}.")
@@ -95,7 +94,9 @@ class Model:
         free = np.ones(self.ndofs, dtype=bool)
         free[self.fixed_dofs] = False
         self.free = free
-        self.free.setflags(write=False)
+        # a Model is immutable: its arrays are read-only views for everyone
+        for arr in (self.free, self.fixed_dofs):
+            arr.setflags(write=False)
 
     # sizes and maps -----------------------------------------------------------
     @property
@@ -122,7 +123,11 @@ class Model:
         """Lumped mass per DOF (kg), built on first use."""
         return lumped_mass(self.space, self.density)
 
-    # energy -------------------------------------------------------------------
+    # energy: every term through the Potential protocol ----------------------------
+    def _scaled_terms(self, load_factor: float):
+        """(potential, factor) pairs: the body at 1, each load at the load factor."""
+        return [(self.body_potential, 1.0)] + [(load, load_factor) for load in self.loads]
+
     def external_force(self, load_factor: float = 1.0) -> np.ndarray:
         """Sum of the dead loads' nodal forces (N), ``(ndofs,)``."""
         f = np.zeros(self.ndofs)
@@ -132,38 +137,52 @@ class Model:
 
     def energy(self, x: np.ndarray, load_factor: float = 1.0) -> float:
         """Total potential energy Pi(x) (J); +inf where x is inadmissible."""
-        e = self.body_potential.energy(x)
-        if not math.isfinite(e):
-            return math.inf
-        return e + load_factor * sum(load.energy(x) for load in self.loads)
+        total = 0.0
+        for term, c in self._scaled_terms(load_factor):
+            e = term.energy(x)
+            if not math.isfinite(e):
+                return math.inf
+            total += c * e
+        return total
 
-    def energy_roundoff(self, x: np.ndarray, load_factor: float = 1.0) -> float:
-        """Absolute round-off of Pi(x) (J), below which energy differences carry no information."""
-        eps = np.finfo(float).eps
-        terms = abs(self.body_potential.energy(x)) + sum(
-            abs(load_factor * load.energy(x)) for load in self.loads
-        )
-        return eps * terms + self.body_potential.energy_roundoff()
+    def energy_roundoff(self) -> float:
+        """Absolute round-off of Pi near the rest state (J).
+
+        Energy differences below this carry no information (see
+        ``ElasticPotential.energy_roundoff``); the dead loads are exact linear
+        functions and add only eps |Pi|, which Newton adds itself.
+        """
+        return self.body_potential.energy_roundoff()
 
     def gradient(self, x: np.ndarray, load_factor: float = 1.0) -> np.ndarray:
         """dPi/dx (N), ``(ndofs,)``; the force on the DOFs is its negative."""
-        return self.body_potential.gradient(x) - self.external_force(load_factor)
+        g = np.zeros(self.ndofs)
+        for term, c in self._scaled_terms(load_factor):
+            g += c * term.gradient(x)
+        return g
 
     def linearize(self, x: np.ndarray, load_factor: float = 1.0, project: bool = True):
         """Gradient (N) and Hessian (N/m, CSR) of Pi at x.
 
         ``project=True`` returns the per-point PSD projection of the tangent,
-        which makes Newton's step a descent direction.
+        which makes Newton's step a descent direction. Terms whose Hessian is
+        zero (dead loads) return None and add nothing.
         """
-        g, H = self.body_potential.linearize(x, project=project)
-        return g - self.external_force(load_factor), H
+        g = np.zeros(self.ndofs)
+        H = None
+        for term, c in self._scaled_terms(load_factor):
+            gt, Ht = term.linearize(x, project=project)
+            g += c * gt
+            if Ht is not None:
+                Ht = Ht if c == 1.0 else c * Ht  # keep the body's matrix (and its pattern) as is
+                H = Ht if H is None else H + Ht
+        return g, H
 
     # supports -----------------------------------------------------------------
     def _resolve_fixed(self, fixed) -> np.ndarray:
         mesh, space = self.mesh, self.space
         nv = mesh.p.shape[1]
-        boundaries = mesh.boundaries or {}
-        if fixed is None:
+        if fixed is None or (not isinstance(fixed, str) and np.size(fixed) == 0):
             return np.zeros(0, dtype=np.int64)
         names = [fixed] if isinstance(fixed, str) else None
         if names is None and len(fixed) > 0 and all(isinstance(f, str) for f in fixed):
@@ -171,12 +190,8 @@ class Model:
         if names is not None:
             dofs = []
             for name in names:
-                if name not in boundaries:
-                    raise InvalidParameter(
-                        f"fixed names boundary {name!r}, which the mesh does not have; "
-                        f"its boundaries are {sorted(boundaries)}."
-                    )
-                dofs.append(space.basis.get_dofs(boundaries[name]).all())
+                facets = boundary_facets(mesh, name, what="fixed")
+                dofs.append(space.node_dofs(space.scalar_basis.get_dofs(facets).all()))
             return np.unique(np.concatenate(dofs)).astype(np.int64)
         arr = np.asarray(fixed)
         if arr.dtype == bool:
@@ -201,7 +216,7 @@ class Model:
         dofs = [space.vertex_dofs[mask].ravel()]
         if space.order == 2:
             edge_fixed = mask[mesh.edges].all(axis=0)
-            dofs.append(np.asarray(space.basis.edge_dofs)[:, edge_fixed].ravel())
+            dofs.append(space.node_dofs(np.asarray(space.scalar_basis.edge_dofs)[0, edge_fixed]))
         return np.unique(np.concatenate(dofs)).astype(np.int64)
 
     def check_supported(self) -> None:
@@ -220,8 +235,9 @@ class Model:
                 "problem has no unique solution. Fix a boundary, e.g. fe.Model(..., fixed='left'), "
                 "or vertex indices, or simulate the dynamics instead."
             )
+        # svd returns min(n_fixed, 6) values: count the rank, not the small values
         s = np.linalg.svd(B[self.fixed_dofs], compute_uv=False)
-        free_modes = int(np.sum(s < 1e-8 * s[0]))  # relative to the largest: round-off level
+        free_modes = 6 - int(np.sum(s > 1e-8 * s[0]))  # relative to the largest: round-off level
         if free_modes:
             raise UnderConstrained(
                 f"the fixed DOFs leave {free_modes} rigid-body mode(s) free (for instance, "

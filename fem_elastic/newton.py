@@ -36,7 +36,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from .linear_solvers import AutoSolver, SingularMatrix
+from .linear_solvers import AutoSolver, LinearSolverFailed, SingularMatrix
 
 __all__ = ["NewtonResult", "newton_minimize"]
 
@@ -108,7 +108,7 @@ def newton_minimize(
     linear_solver=None,
     near_null: np.ndarray | None = None,
     pattern=None,
-    energy_roundoff: Callable[[np.ndarray], float] | None = None,
+    energy_roundoff: float = 0.0,
     armijo: float = 1e-4,
     max_cuts: int = 30,
     project: bool = True,
@@ -140,10 +140,10 @@ def newton_minimize(
         ``(ndofs, k)`` near-null space for AMG (rigid-body modes).
     pattern : SparsityPattern, optional
         The Hessian's CSR pattern, for cheap constraint application.
-    energy_roundoff : callable, optional
-        x -> the absolute round-off of Pi (J); when the predicted decrease
-        is below a few times this, the full step is taken. Default
-        ``eps * |Pi(x)|``.
+    energy_roundoff : float
+        Absolute round-off of Pi (J) beyond ``eps |Pi|``; when the predicted
+        decrease is below ten times the total, energy comparisons are
+        meaningless and the full step is taken.
     armijo : float
         Sufficient-decrease constant c of the Armijo condition.
     max_cuts : int
@@ -152,9 +152,11 @@ def newton_minimize(
         Use the PSD-projected Hessian away from the solution (and the exact
         one near it, see the module notes). False always uses the exact one.
     g_floor : float
-        Round-off level of ||g|| (N), below which no iterate can be told
-        apart from the solution; converged when ||g|| <= 10 g_floor as well
-        (a margin of 10 for the statistical spread of the round-off).
+        Round-off level of ||g|| (N), an upper bound (it adds the round-off
+        of every element coherently). Also converged when ||g|| <= 10
+        g_floor and the Newton step predicts an energy decrease below the
+        energy's round-off: no iterate can then be told apart from the
+        solution.
 
     Returns
     -------
@@ -183,17 +185,19 @@ def newton_minimize(
             return result
         if g_scale is None:
             g_scale = gnorm
-        if gnorm <= max(rtol * g_scale, 10.0 * g_floor) or gnorm == 0.0:
+        if gnorm <= rtol * g_scale or gnorm == 0.0:
             result.converged = True
-            result.message = (
-                f"||g|| = {gnorm:.3e} N <= max({rtol:.1e} * {g_scale:.3e} N, "
-                f"10 x round-off {g_floor:.3e} N)"
-            )
+            result.message = f"||g|| = {gnorm:.3e} N <= {rtol:.1e} * {g_scale:.3e} N"
             break
         if it == max_iter:
             result.message = f"no convergence in {max_iter} iterations (||g|| = {gnorm:.3e} N)"
             break
-        dx, slope = _direction(solver, H, g, free, pattern, near_null, result)
+        try:
+            dx, slope = _direction(solver, H, g, free, pattern, near_null, result)
+        except LinearSolverFailed:
+            if not (exact and project):
+                raise
+            dx, slope = np.zeros_like(g), 0.0  # an indefinite exact Hessian stalls CG
         if exact and project and not slope < 0:
             # the exact Hessian is indefinite here: go back to the projection
             log.debug("exact Hessian gave no descent direction; projecting")
@@ -207,8 +211,14 @@ def newton_minimize(
             dx = -g * (np.linalg.norm(dx) / gnorm)
             slope = float(g @ dx)
         t0 = time.perf_counter()
-        noise = energy_roundoff(x) if energy_roundoff is not None else _EPS * abs(e)
-        roundoff = 0.5 * abs(slope) <= 10.0 * noise
+        roundoff = 0.5 * abs(slope) <= 10.0 * (energy_roundoff + _EPS * abs(e))
+        if roundoff and gnorm <= 10.0 * g_floor:
+            result.converged = True
+            result.message = (
+                f"||g|| = {gnorm:.3e} N is at its round-off level ({g_floor:.3e} N) and the "
+                "Newton step predicts no decrease above the energy's round-off"
+            )
+            break
         alpha = 1.0
         for cut in range(max_cuts + 1):
             x_try = x + alpha * dx

@@ -49,8 +49,6 @@ class LinearPotential(Potential):
         ``(ndofs,)`` reference positions (m); the energy is zero there.
     """
 
-    is_load = True
-
     def __init__(self, force: np.ndarray, X: np.ndarray):
         self.force = np.asarray(force, dtype=float)
         self.X = X

@@ -87,10 +87,10 @@ def solve_static(
         Must fix enough DOFs to remove rigid-body motion.
     rtol : float
         Newton stops when the out-of-balance force on the free DOFs is below
-        ``rtol`` times the norm of the external load (N), or below ten times
-        its round-off floor (see ``ElasticPotential.gradient_roundoff``),
-        whichever is larger: a stiff body under a small load cannot be
-        resolved below that floor.
+        ``rtol`` times the norm of the external load (N), or when it is
+        within ten times its round-off floor (``ElasticPotential.gradient_roundoff``)
+        and the next Newton step would change the energy by less than its
+        round-off: a stiff body under a small load cannot be resolved further.
     max_iter : int
         Most Newton iterations per load step.
     linear_solver : object, optional
@@ -142,6 +142,7 @@ def solve_static(
     g_scale_full = float(np.linalg.norm(f_full[free]))
     near_null = model.space.rigid_body_modes()
     g_floor = model.body_potential.gradient_roundoff()
+    e_noise = model.energy_roundoff()
     pattern = model.space.pattern
     x = model.X.copy()
     total = StaticResult(
@@ -166,7 +167,7 @@ def solve_static(
             linear_solver=linear_solver,
             near_null=near_null,
             pattern=pattern,
-            energy_roundoff=lambda y: model.energy_roundoff(y, target),
+            energy_roundoff=e_noise,
             project=project,
             g_floor=g_floor,
         )

@@ -110,3 +110,16 @@ def test_invalid_order_raises(order):
 def test_non_tet_mesh_raises():
     with pytest.raises(fe.InvalidMesh, match="tetrahedral"):
         Discretization(skfem.MeshHex(), 1)
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_scalar_built_dof_maps_equal_scikit_fems_vector_basis(order):
+    # the kernels never build the vector basis; their DOF tables must be its tables
+    space = Discretization(fe.beam_mesh(cells=(3, 2, 1)), order)
+    vb = space.basis
+    np.testing.assert_array_equal(space.element_dofs, vb.element_dofs)
+    assert space.ndofs == vb.N
+    np.testing.assert_array_equal(space.vertex_dofs, np.asarray(vb.nodal_dofs).T)
+    dofs = np.arange(space.ndofs)
+    # doflocs agree to a few ulps (scikit-fem maps the reference nodes per element)
+    np.testing.assert_allclose(space.X, np.asarray(vb.doflocs)[dofs % 3, dofs], rtol=0, atol=1e-15)

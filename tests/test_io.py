@@ -54,6 +54,53 @@ def test_file_with_only_triangles_is_rejected(tmp_path):
     assert "gmsh -3" in str(err.value)
 
 
+# Unit cube corners 0-7 plus an apex 8 above it; one tet on top, one hex below.
+_CUBE_POINTS = np.array(
+    [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1],
+     [0, 0, 2]],
+    dtype=float,
+)
+_HEX = np.array([[0, 1, 2, 3, 4, 5, 6, 7]])
+_TET = np.array([[4, 5, 7, 8]])
+
+
+def test_tet_plus_hexahedron_is_rejected_not_dropped(tmp_path):
+    path = tmp_path / "mixed.vtu"
+    meshio.write(path, meshio.Mesh(_CUBE_POINTS, [("tetra", _TET), ("hexahedron", _HEX)]))
+    with pytest.raises(InvalidMesh, match="hexahedron") as err:
+        load_mesh(path)
+    message = str(err.value)
+    assert "1 hexahedron" in message and "1 tetra" in message
+    assert "gmsh -3" in message and "TetGen" in message
+
+
+def test_hexahedron_only_file_is_rejected_with_count(tmp_path):
+    path = tmp_path / "hexes.vtu"
+    hexes = np.vstack([_HEX, _HEX])  # two copies: the count must read 2
+    meshio.write(path, meshio.Mesh(_CUBE_POINTS[:8], [("hexahedron", hexes)]))
+    with pytest.raises(InvalidMesh, match="2 hexahedron") as err:
+        load_mesh(path)
+    assert "split the hexahedra" in str(err.value)
+
+
+@pytest.mark.parametrize(
+    "cell_type, cells",
+    [("wedge", np.array([[0, 1, 2, 4, 5, 6]])), ("pyramid", np.array([[0, 1, 2, 3, 8]]))],
+)
+def test_other_volume_cells_beside_tets_are_rejected(tmp_path, cell_type, cells):
+    path = tmp_path / f"{cell_type}.vtu"
+    meshio.write(path, meshio.Mesh(_CUBE_POINTS, [("tetra", _TET), (cell_type, cells)]))
+    with pytest.raises(InvalidMesh, match=f"1 {cell_type}"):
+        load_mesh(path)
+
+
+def test_tets_with_boundary_triangles_and_lines_still_load(tmp_path):
+    path = tmp_path / "tet_tri_line.vtu"
+    cells = [("tetra", _TET), ("triangle", np.array([[4, 5, 7]])), ("line", np.array([[4, 5]]))]
+    meshio.write(path, meshio.Mesh(_CUBE_POINTS, cells))
+    assert load_mesh(path).t.shape == (4, 1)
+
+
 def test_missing_file(tmp_path):
     path = tmp_path / "nope.vtu"
     with pytest.raises(FileNotFoundError, match="nope.vtu"):

@@ -7,6 +7,7 @@ from skfem import MeshHex, MeshTet, MeshTri
 from fem_elastic.errors import InvalidMesh, InvalidParameter
 from fem_elastic.mesh import (
     beam_mesh,
+    boundary_facets,
     mesh_from_arrays,
     mesh_quality,
     remove_unused_vertices,
@@ -194,3 +195,28 @@ def test_mesh_quality_reports_beam():
 
 def _triples(mesh, facets):
     return {tuple(sorted(f)) for f in mesh.facets[:, facets].T.tolist()}
+
+
+def test_boundary_facets_returns_named_facets():
+    mesh = beam_mesh()
+    facets = boundary_facets(mesh, "left", what="Support")
+    np.testing.assert_array_equal(facets, mesh.boundaries["left"])
+
+
+def test_boundary_facets_unknown_name_lists_boundaries():
+    mesh = beam_mesh()
+    with pytest.raises(InvalidParameter) as err:
+        boundary_facets(mesh, "lefft", what="Load 'push'")
+    assert str(err.value) == (
+        "Load 'push' names boundary 'lefft', which the mesh does not have; its boundaries "
+        "are ['back', 'bottom', 'front', 'left', 'right', 'top']."
+    )
+
+
+def test_boundary_facets_without_boundaries_and_empty_boundary():
+    mesh = MeshTet(POINTS.T, TETS.T)
+    with pytest.raises(InvalidParameter, match=r"boundaries are \[\]"):
+        boundary_facets(mesh, "left", what="Support")
+    empty = beam_mesh().with_boundaries({"hole": np.array([], dtype=np.int64)})
+    with pytest.raises(InvalidParameter, match="'hole'.*empty \\(no facets\\)"):
+        boundary_facets(empty, "hole", what="Support")

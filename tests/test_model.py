@@ -83,3 +83,20 @@ def test_under_constrained_messages():
     with pytest.raises(fe.UnderConstrained, match="1 rigid-body mode"):
         make(mesh=mesh, fixed=line).check_supported()
     make(mesh=mesh).check_supported()  # a whole face: no error
+
+
+def test_one_fixed_vertex_leaves_three_rotations_free():
+    # three fixed DOFs give only three singular values: the rank, not the count of small
+    # values, tells how many of the six modes are held
+    with pytest.raises(fe.UnderConstrained, match="3 rigid-body mode"):
+        make(fixed=[0]).check_supported()
+    with pytest.raises(fe.UnderConstrained, match="fixes nothing"):
+        make(fixed=[]).check_supported()
+
+
+def test_model_arrays_are_read_only():
+    model = make()
+    with pytest.raises(ValueError):
+        model.free[0] = False
+    with pytest.raises(ValueError):
+        model.fixed_dofs[0] = 1

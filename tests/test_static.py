@@ -306,3 +306,22 @@ def test_direct_and_amg_solvers_agree():
     assert diff <= bound
     # and in plain terms: the same displacement to well within the 1e-8 solver tolerance * 100
     assert np.abs(ra.displacement - rd.displacement).max() < 1e-6 * np.abs(rd.displacement).max()
+
+
+def test_amg_with_an_indefinite_exact_tangent_falls_back_to_the_projection():
+    """Axial compression makes the exact corotated tangent indefinite; CG on it stalls.
+
+    Newton must then go back to the PSD projection (on which AMG-CG converges) instead
+    of failing the whole solve; the direct solver gives the reference answer.
+    """
+    def solve(solver):
+        model = fe.Model(fe.beam_mesh(1.0, 0.1, 0.1, (20, 2, 2)), density=1000.0,
+                         body=fe.ElasticBody(fe.Corotated(E=1e9, nu=0.3), order=2), fixed="left",
+                         traction={"right": (-2e6, 0.0, -1e3)})
+        return fe.solve_static(model, linear_solver=solver)
+
+    amg, direct = solve(fe.AMGSolver()), solve(fe.DirectSolver())
+    assert amg.converged and direct.converged
+    # both meet rtol = 1e-8 on the same equilibrium: the answers agree far below 1e-6
+    scale = np.abs(direct.displacement).max()
+    np.testing.assert_allclose(amg.displacement, direct.displacement, rtol=0, atol=1e-6 * scale)

@@ -30,13 +30,17 @@ three columns of ``M`` per column (``C'`` has 21 non-zeros), and the final
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
+from .base import Material, _flat
 from .svd import signed_svd
 
-__all__ = ["PAIRS", "DENSE_FRACTION", "isotropic_hessian", "project_psd", "is_psd_3x3"]
+__all__ = [
+    "PAIRS", "DENSE_FRACTION", "IsotropicMaterial", "isotropic_hessian", "project_psd", "is_psd_3x3",
+]
 
 #: Fraction of indefinite points above which :func:`project_psd` rebuilds every
 #: point from the eigensystem (measured break-even on 150k points: ~0.2-0.3).
@@ -215,3 +219,44 @@ def project_psd(
             U[..., bad], s[:, bad], V[..., bad], H[..., bad], lt[:, bad], lf[:, bad], clamp=True
         )
     return C
+
+
+@dataclass(frozen=True)
+class IsotropicMaterial(Material):
+    """A material whose energy depends on F only through its singular values.
+
+    Subclasses give the closed-form eigensystem of their Hessian in
+    ``singular_value_hessian(s) -> (d2psi_ds2 (3, 3, N), lam_twist (3, N),
+    lam_flip (3, N))``, from which :meth:`d2psi_dF2_psd` is built.
+    """
+
+    def singular_value_hessian(self, s: np.ndarray):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def d2psi_dF2_psd(self, F: np.ndarray) -> np.ndarray:
+        """Tangent projected to positive semi-definite (negative eigenvalues set to 0).
+
+        Equal to :meth:`d2psi_dF2` wherever that is already PSD (see
+        :func:`project_psd`).
+
+        Parameters
+        ----------
+        F : numpy.ndarray, shape (3, 3, ...)
+            Deformation gradients.
+
+        Returns
+        -------
+        C : numpy.ndarray, shape (3, 3, 3, 3) + F.shape[2:]
+            Projected tangent (Pa).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from fem_elastic.materials import NeoHookean
+        >>> C = NeoHookean(E=1.0, nu=0.45).d2psi_dF2_psd(np.diag([0.5, 0.6, 0.7]))
+        >>> bool(np.linalg.eigvalsh(C.reshape(9, 9)).min() >= -1e-12)
+        True
+        """
+        Ff, batch = _flat(F)
+        C = project_psd(Ff, self.singular_value_hessian, self.d2psi_dF2)
+        return C.reshape((3, 3, 3, 3) + batch)

@@ -18,14 +18,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import Material, _add_identity_term, _cofactor, _det, _flat, _outer
-from .isotropic import PAIRS, project_psd
+from .base import _add_identity_term, _cofactor, _det, _flat, _outer
+from .isotropic import PAIRS, IsotropicMaterial
 
 __all__ = ["NeoHookean"]
 
 
 @dataclass(frozen=True)
-class NeoHookean(Material):
+class NeoHookean(IsotropicMaterial):
     """Neo-Hookean material ``psi = mu/2 (I1 - 3) - mu ln J + lam/2 (ln J)^2``.
 
     ``psi = +inf`` where ``J <= 0``; ``P`` and ``C`` (and the projection) are
@@ -183,30 +183,3 @@ class NeoHookean(Material):
             lt[row] = mu + q
             lf[row] = mu - q
         return H, lt, lf
-
-    def d2psi_dF2_psd(self, F: np.ndarray) -> np.ndarray:
-        """Tangent projected to positive semi-definite (negative eigenvalues set to 0).
-
-        Equal to :meth:`d2psi_dF2` where that is already PSD; undefined (NaN)
-        where ``det F <= 0``.
-
-        Parameters
-        ----------
-        F : numpy.ndarray, shape (3, 3, ...)
-            Deformation gradients.
-
-        Returns
-        -------
-        C : numpy.ndarray, shape (3, 3, 3, 3) + F.shape[2:]
-            Projected tangent (Pa).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> C = NeoHookean(E=1.0, nu=0.45).d2psi_dF2_psd(np.diag([0.5, 0.6, 0.7]))
-        >>> bool(np.linalg.eigvalsh(C.reshape(9, 9)).min() >= -1e-12)
-        True
-        """
-        Ff, batch = _flat(F)
-        C = project_psd(Ff, self.singular_value_hessian, self.d2psi_dF2)
-        return C.reshape((3, 3, 3, 3) + batch)

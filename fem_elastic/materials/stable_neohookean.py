@@ -21,7 +21,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from .base import (
-    Material,
     _add_cofactor_derivative,
     _add_identity_term,
     _add_outer,
@@ -30,13 +29,13 @@ from .base import (
     _flat,
     _outer,
 )
-from .isotropic import PAIRS, project_psd
+from .isotropic import PAIRS, IsotropicMaterial
 
 __all__ = ["StableNeoHookean"]
 
 
 @dataclass(frozen=True)
-class StableNeoHookean(Material):
+class StableNeoHookean(IsotropicMaterial):
     """Stable Neo-Hookean material of Smith, de Goes and Kim (2018).
 
     ``psi = mu'/2 (I_C - 3) + lam'/2 (J - alpha)^2 - mu'/2 ln(I_C + 1)``,
@@ -215,29 +214,3 @@ class StableNeoHookean(Material):
             lt[row] = m + hs
             lf[row] = m - hs
         return H, lt, lf
-
-    def d2psi_dF2_psd(self, F: np.ndarray) -> np.ndarray:
-        """Tangent projected to positive semi-definite (negative eigenvalues set to 0).
-
-        Equal to :meth:`d2psi_dF2` where that is already PSD.
-
-        Parameters
-        ----------
-        F : numpy.ndarray, shape (3, 3, ...)
-            Deformation gradients.
-
-        Returns
-        -------
-        C : numpy.ndarray, shape (3, 3, 3, 3) + F.shape[2:]
-            Projected tangent (Pa).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> C = StableNeoHookean(E=1.0, nu=0.45).d2psi_dF2_psd(np.diag([1.0, 1.0, -0.5]))
-        >>> bool(np.linalg.eigvalsh(C.reshape(9, 9)).min() >= -1e-12)
-        True
-        """
-        Ff, batch = _flat(F)
-        C = project_psd(Ff, self.singular_value_hessian, self.d2psi_dF2)
-        return C.reshape((3, 3, 3, 3) + batch)

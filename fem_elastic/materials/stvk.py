@@ -17,14 +17,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import Material, _flat, _outer, _right_cauchy_green
-from .isotropic import PAIRS, project_psd
+from .base import _flat, _outer, _right_cauchy_green
+from .isotropic import PAIRS, IsotropicMaterial
 
 __all__ = ["StVK"]
 
 
 @dataclass(frozen=True)
-class StVK(Material):
+class StVK(IsotropicMaterial):
     """St. Venant-Kirchhoff material ``psi = mu E:E + lam/2 tr(E)^2``, ``E = (F^T F - I)/2``.
 
     Parameters
@@ -181,29 +181,3 @@ class StVK(Material):
             lf[row] = base + mu * s[i] * s[j]
             lt[row] = base - mu * s[i] * s[j]
         return H, lt, lf
-
-    def d2psi_dF2_psd(self, F: np.ndarray) -> np.ndarray:
-        """Tangent projected to positive semi-definite (negative eigenvalues set to 0).
-
-        Equal to :meth:`d2psi_dF2` wherever that is already PSD.
-
-        Parameters
-        ----------
-        F : numpy.ndarray, shape (3, 3, ...)
-            Deformation gradients.
-
-        Returns
-        -------
-        C : numpy.ndarray, shape (3, 3, 3, 3) + F.shape[2:]
-            Projected tangent (Pa).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> C = StVK(E=1.0, nu=0.3).d2psi_dF2_psd(0.5 * np.eye(3))
-        >>> bool(np.linalg.eigvalsh(C.reshape(9, 9)).min() >= -1e-12)
-        True
-        """
-        Ff, batch = _flat(F)
-        C = project_psd(Ff, self.singular_value_hessian, self.d2psi_dF2)
-        return C.reshape((3, 3, 3, 3) + batch)
