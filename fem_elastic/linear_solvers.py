@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -182,18 +182,31 @@ class AutoSolver:
         pyamg installed, every system is solved directly.
     amg : AMGSolver
         The iterative solver used above the threshold.
+    fallback : bool
+        Solve directly when AMG-CG fails (default); False re-raises.
     """
 
     max_direct_dofs: int = 20_000
     amg: AMGSolver = AMGSolver()
+    fallback: bool = True
 
     def solve(self, A, b, near_null=None) -> LinearSolve:
         if A.shape[0] > self.max_direct_dofs and _have_pyamg():
             try:
                 return self.amg.solve(A, b, near_null)
             except LinearSolverFailed as exc:
+                if not self.fallback:
+                    raise
                 log.warning("%s Falling back to the direct solver.", exc)
         return DirectSolver().solve(A, b, near_null)
+
+    def strict(self) -> "AutoSolver":
+        """The same solver, raising :class:`LinearSolverFailed` instead of falling back.
+
+        Newton uses it on an exact (possibly indefinite) tangent, where the
+        better remedy for a stalled CG is the PSD projection, not a large LU.
+        """
+        return replace(self, fallback=False)
 
 
 def _have_pyamg() -> bool:

@@ -192,8 +192,10 @@ def newton_minimize(
         if it == max_iter:
             result.message = f"no convergence in {max_iter} iterations (||g|| = {gnorm:.3e} N)"
             break
+        # on an exact tangent, a stalled CG is answered by projecting, not by a big LU
+        strict = solver.strict() if exact and project and hasattr(solver, "strict") else solver
         try:
-            dx, slope = _direction(solver, H, g, free, pattern, near_null, result)
+            dx, slope = _direction(strict, H, g, free, pattern, near_null, result)
         except LinearSolverFailed:
             if not (exact and project):
                 raise

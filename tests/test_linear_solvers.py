@@ -56,3 +56,10 @@ def test_amg_failure_is_reported_and_auto_falls_back_to_direct(system):
     assert info.value.result.iterations == 2
     res = fe.AutoSolver(max_direct_dofs=10, amg=starved).solve(A, b, B)
     assert res.method == "direct" and res.residual < 1e-10
+
+
+def test_strict_auto_solver_reraises(system):
+    A, b, B = system
+    strict = fe.AutoSolver(max_direct_dofs=10, amg=fe.AMGSolver(rtol=1e-10, maxiter=2)).strict()
+    with pytest.raises(fe.LinearSolverFailed):
+        strict.solve(A, b, B)

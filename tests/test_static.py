@@ -308,11 +308,14 @@ def test_direct_and_amg_solvers_agree():
     assert np.abs(ra.displacement - rd.displacement).max() < 1e-6 * np.abs(rd.displacement).max()
 
 
-def test_amg_with_an_indefinite_exact_tangent_falls_back_to_the_projection():
+@pytest.mark.parametrize("iterative", [fe.AMGSolver(), fe.AutoSolver(max_direct_dofs=10)],
+                         ids=["AMGSolver", "AutoSolver"])
+def test_amg_with_an_indefinite_exact_tangent_falls_back_to_the_projection(iterative, caplog):
     """Axial compression makes the exact corotated tangent indefinite; CG on it stalls.
 
     Newton must then go back to the PSD projection (on which AMG-CG converges) instead
-    of failing the whole solve; the direct solver gives the reference answer.
+    of failing the whole solve, or, with AutoSolver, of factorizing the matrix by LU;
+    the direct solver gives the reference answer.
     """
     def solve(solver):
         model = fe.Model(fe.beam_mesh(1.0, 0.1, 0.1, (20, 2, 2)), density=1000.0,
@@ -320,7 +323,10 @@ def test_amg_with_an_indefinite_exact_tangent_falls_back_to_the_projection():
                          traction={"right": (-2e6, 0.0, -1e3)})
         return fe.solve_static(model, linear_solver=solver)
 
-    amg, direct = solve(fe.AMGSolver()), solve(fe.DirectSolver())
+    with caplog.at_level("WARNING", logger="fem_elastic.linear_solvers"):
+        amg = solve(iterative)
+    assert "Falling back to the direct solver" not in caplog.text
+    direct = solve(fe.DirectSolver())
     assert amg.converged and direct.converged
     # both meet rtol = 1e-8 on the same equilibrium: the answers agree far below 1e-6
     scale = np.abs(direct.displacement).max()
