@@ -6,6 +6,8 @@ quadratic convergence near the solution, load stepping, typed errors, the
 vertex-only displacement output and the agreement of the linear solvers.
 """
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import scipy.sparse.linalg as spla
@@ -331,3 +333,38 @@ def test_amg_with_an_indefinite_exact_tangent_falls_back_to_the_projection(itera
     # both meet rtol = 1e-8 on the same equilibrium: the answers agree far below 1e-6
     scale = np.abs(direct.displacement).max()
     np.testing.assert_allclose(amg.displacement, direct.displacement, rtol=0, atol=1e-6 * scale)
+
+
+def test_shipped_blob_hangs_in_force_and_moment_balance():
+    """The non-box shipped mesh, standing on its fixed underside under gravity.
+
+    Elastic energy is invariant under translations and (for a frame-indifferent material)
+    rotations of the deformed body, so at equilibrium the support reactions r must carry
+    the whole weight and its moment about any point, evaluated in the deformed positions:
+    sum r = -sum f, sum x x r = -sum x x f.
+    """
+    mesh = fe.load_mesh(Path(__file__).resolve().parent.parent / "meshes" / "blob.vtu")
+    model = fe.Model(mesh, density=1000.0, body=fe.ElasticBody(fe.NeoHookean(E=2e4, nu=0.4)),
+                     fixed="bottom", gravity=(3.0, 0.0, -9.81))  # a sideways pull makes a moment
+    res = fe.solve_static(model)
+    assert res.converged
+    assert res.displacement[:, 2].min() < -1e-3  # m: a soft blob visibly settles
+    x = res.x.reshape(-1, 3)
+    f = model.external_force().reshape(-1, 3)
+    r = (model.body_potential.gradient(res.x) - model.external_force()).reshape(-1, 3)
+    fixed_nodes = np.unique(model.fixed_dofs // 3)
+    free_r = np.delete(r, fixed_nodes, axis=0)
+    weight = np.linalg.norm(f.sum(axis=0))
+    # Newton stopped at ||g_free|| <= 1e-8 ||f||: free-node residuals are that small
+    assert np.linalg.norm(free_r) <= 1e-8 * np.linalg.norm(f) * 1.01
+    R = r[fixed_nodes]
+    # the balances hold to the free-node residual (1e-8 ||f||) times the number of nodes
+    # it is spread over, sqrt(n) ~ 30: 1e-6 of the weight leaves a margin of ~3
+    np.testing.assert_allclose(R.sum(axis=0), -f.sum(axis=0), rtol=0, atol=1e-6 * weight)
+    size = np.ptp(x, axis=0).max()
+    moment = np.cross(x[fixed_nodes], R).sum(axis=0) + np.cross(x, f).sum(axis=0)
+    assert np.linalg.norm(moment) <= 1e-6 * weight * size
+    # and the moment balance needs the deformed positions: with X it fails visibly
+    X = model.X.reshape(-1, 3)
+    moment_ref = np.cross(X[fixed_nodes], R).sum(axis=0) + np.cross(X, f).sum(axis=0)
+    assert np.linalg.norm(moment_ref) > 1e3 * np.linalg.norm(moment)
