@@ -210,7 +210,9 @@ def newton_minimize(
             dx, slope = _direction(solver, H, g, free, pattern, near_null, result)
         if not slope < 0:  # still no descent direction: steepest descent
             log.debug("Newton direction is not a descent direction; using -g")
-            dx = -g * (np.linalg.norm(dx) / gnorm)
+            # keep the Newton step's length; without one, a step of -g / max diag(H)
+            length = np.linalg.norm(dx) or gnorm / max(float(np.abs(H.diagonal()).max()), _EPS)
+            dx = -g * (length / gnorm)
             slope = float(g @ dx)
         t0 = time.perf_counter()
         roundoff = 0.5 * abs(slope) <= 10.0 * (energy_roundoff + _EPS * abs(e))
