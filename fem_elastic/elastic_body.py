@@ -144,10 +144,8 @@ class ElasticPotential(Potential):
         return self.space.pattern.assemble(self.element_stiffness(C))
 
     def linearize(self, x: np.ndarray, project: bool = False):
-        F = self.F(x)
-        g = self._force(self.material.dpsi_dF(F))
-        C = self.material.d2psi_dF2_psd(F) if project else self.material.d2psi_dF2(F)
-        return g, self.space.pattern.assemble(self.element_stiffness(C))
+        P, C = self.material.stress_and_tangent(self.F(x), project=project)
+        return self._force(P), self.space.pattern.assemble(self.element_stiffness(C))
 
     # kernels -----------------------------------------------------------------
     def _force(self, P: np.ndarray) -> np.ndarray:

@@ -154,6 +154,10 @@ class Model:
         """
         return self.body_potential.energy_roundoff()
 
+    def gradient_roundoff(self) -> float:
+        """Round-off floor of ||dPi/dx|| (N): the body's (``ElasticPotential.gradient_roundoff``)."""
+        return self.body_potential.gradient_roundoff()
+
     def gradient(self, x: np.ndarray, load_factor: float = 1.0) -> np.ndarray:
         """dPi/dx (N), ``(ndofs,)``; the force on the DOFs is its negative."""
         g = np.zeros(self.ndofs)

@@ -141,7 +141,7 @@ def solve_static(
     free = model.free
     g_scale_full = float(np.linalg.norm(f_full[free]))
     near_null = model.space.rigid_body_modes()
-    g_floor = model.body_potential.gradient_roundoff()
+    g_floor = model.gradient_roundoff()
     e_noise = model.energy_roundoff()
     pattern = model.space.pattern
     x = model.X.copy()

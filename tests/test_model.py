@@ -100,3 +100,13 @@ def test_model_arrays_are_read_only():
         model.free[0] = False
     with pytest.raises(ValueError):
         model.fixed_dofs[0] = 1
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_model_mass_is_the_body_mass(order):
+    model = make(body=fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3), order=order))
+    volume = 1.0 * 0.1 * 0.1  # beam_mesh defaults (m^3)
+    ones = np.ones(model.ndofs)
+    # three components each carry the whole mass rho V (kg), exactly up to round-off
+    np.testing.assert_allclose(ones @ model.mass_matrix @ ones, 3 * 1000.0 * volume, rtol=1e-12)
+    np.testing.assert_allclose(model.lumped_mass.sum(), 3 * 1000.0 * volume, rtol=1e-12)

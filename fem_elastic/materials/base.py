@@ -126,6 +126,14 @@ class Material:
         """dP/dF with negative eigenvalues (as a 9x9 map) clamped to zero."""
         raise NotImplementedError
 
+    def stress_and_tangent(self, F: np.ndarray, project: bool = False):
+        """``(P, C)`` at once, C projected to PSD when ``project``: what Newton needs.
+
+        Materials whose stress and tangent share expensive work (an SVD)
+        override this to do it once.
+        """
+        return self.dpsi_dF(F), self.d2psi_dF2_psd(F) if project else self.d2psi_dF2(F)
+
 
 # Shared helpers for the material modules -------------------------------------
 def _flat(F) -> tuple[np.ndarray, tuple[int, ...]]:

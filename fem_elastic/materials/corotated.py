@@ -24,8 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import Material, _flat
-from .isotropic import PAIRS, isotropic_hessian
+from .base import _flat
+from .isotropic import PAIRS, IsotropicMaterial, isotropic_hessian
 from .svd import signed_svd
 
 __all__ = ["Corotated", "TWIST_EPS"]
@@ -35,7 +35,7 @@ TWIST_EPS = 1e-6
 
 
 @dataclass(frozen=True)
-class Corotated(Material):
+class Corotated(IsotropicMaterial):
     """Fixed corotated material ``psi = mu ||F - R||^2 + lam/2 tr(R^T F - I)^2``.
 
     Frame-indifferent, finite and continuous through inversion (R stays a
@@ -105,11 +105,12 @@ class Corotated(Material):
         1.0
         """
         F, batch = _flat(F)
-        U, s, V = signed_svd(F)
+        return self._stress(F, *signed_svd(F)).reshape((3, 3) + batch)
+
+    def _stress(self, F, U, s, V):
         R = np.einsum("ian,jan->ijn", U, V)
         tr = s[0] + s[1] + s[2] - 3.0
-        P = 2.0 * self.mu * (F - R) + (self.lam * tr) * R
-        return P.reshape((3, 3) + batch)
+        return 2.0 * self.mu * (F - R) + (self.lam * tr) * R
 
     def singular_value_hessian(self, s: np.ndarray):
         """Eigensystem of the Hessian in terms of the signed singular values.
@@ -151,11 +152,15 @@ class Corotated(Material):
         return H, lt, lf
 
     def _hessian(self, F, clamp):
+        return self.stress_and_tangent(F, project=clamp)[1]
+
+    def stress_and_tangent(self, F: np.ndarray, project: bool = False):
+        """``(P, C)`` from one signed SVD (the stress alone needs one too)."""
         F, batch = _flat(F)
         U, s, V = signed_svd(F)
         H, lt, lf = self.singular_value_hessian(s)
-        C = isotropic_hessian(U, s, V, H, lt, lf, clamp=clamp)
-        return C.reshape((3, 3, 3, 3) + batch)
+        C = isotropic_hessian(U, s, V, H, lt, lf, clamp=project)
+        return self._stress(F, U, s, V).reshape((3, 3) + batch), C.reshape((3, 3, 3, 3) + batch)
 
     def d2psi_dF2(self, F: np.ndarray) -> np.ndarray:
         """Tangent ``dP/dF`` from the singular-value eigensystem (Pa).

@@ -51,7 +51,6 @@ DENSE_FRACTION = 0.25
 PAIRS = ((0, 1, 2), (0, 2, 1), (1, 2, 0))
 
 
-
 def is_psd_3x3(H: np.ndarray) -> np.ndarray:
     """Whether each symmetric 3x3 matrix is positive semi-definite (all principal minors >= 0).
 
