@@ -73,11 +73,16 @@ class Diverged(FemElasticError, RuntimeError):
         What was detected (non-finite state, energy growth, ...).
     last_good_state : object
         The last state that passed every check.
+    trajectory : object
+        What ``simulate`` recorded up to the last good state (None when the
+        error comes from a single ``step`` call).
     """
 
-    def __init__(self, message: str, step=None, time=None, reason=None, last_good_state=None):
+    def __init__(self, message: str, step=None, time=None, reason=None, last_good_state=None,
+                 trajectory=None):
         super().__init__(message)
         self.step = step
         self.time = time
         self.reason = reason
         self.last_good_state = last_good_state
+        self.trajectory = trajectory

@@ -6,10 +6,17 @@ immutable; solvers and integrators read it and return new values.
 
 The total potential energy is the sum of the terms,
 
-    Pi(x) = E_body(x) + s * sum_loads E_load(x),
+    Pi(x) = E_body(x) + s * sum_loads E_load(x) + sum_obstacles E_contact(x),
 
 with ``s`` a load factor in [0, 1] that the static solver's load stepping
-uses (1 is the full load).
+uses (1 is the full load). Only the terms a model declares are built: no
+gravity term without gravity, no contact term without an obstacle.
+
+Dissipation is not an energy: Rayleigh damping (and a body's own damping,
+such as the mass-spring dashpots) enters as a force ``-C v`` that the
+integrators apply. Driven boundaries are time-dependent Dirichlet
+conditions: :meth:`Model.constraints` gives the held DOFs and their
+prescribed positions and velocities at any time.
 """
 
 from __future__ import annotations
@@ -54,6 +61,16 @@ class Model:
     traction : dict or None
         ``{boundary name: traction vector (Pa)}``, dead loads per unit
         reference area.
+    ground : obstacle, sequence of obstacles, or None
+        ``fe.Ground(z=0.0)``, ``fe.Sphere(...)``, ``fe.Box(...)``: contact as a
+        penalty or barrier potential, or an impulse response applied after
+        each step. None builds no contact term.
+    damping : Rayleigh or None
+        ``fe.Rayleigh(alpha, beta)``: damping force ``-(alpha M + beta K_0) v``.
+    driven : dict or None
+        ``{boundary name: motion}``, e.g. ``{"right": fe.Twist(2 * np.pi, duration=1.0)}``:
+        the boundary's DOFs follow the motion until its release time. A
+        static solve holds them at the reference position.
 
     Examples
     --------
@@ -65,7 +82,10 @@ class Model:
     (60, 1)
     """
 
-    def __init__(self, mesh, density, body, fixed=None, gravity=None, traction=None):
+    def __init__(
+        self, mesh, density, body, fixed=None, gravity=None, traction=None,
+        ground=None, damping=None, driven=None,
+    ):
         validate_mesh(mesh)
         if isinstance(density, bool) or not isinstance(density, (int, float, np.number)):
             raise InvalidParameter(f"density must be a number (kg/m^3), got {density!r}.")
@@ -89,10 +109,21 @@ class Model:
         for name, t in (traction or {}).items():
             loads.append(traction_load(self.space, name, t))
         self.loads = tuple(loads)
-        self.potentials = (self.body_potential, *self.loads)
+        self.damping = self._check_damping(damping)
+        self.obstacles = self._check_obstacles(ground)
+        contacts = []
+        for obstacle in self.obstacles:
+            term = obstacle.build(self.space, self.lumped_mass[0::3])
+            if term is not None:
+                contacts.append(term)
+        self.contacts = tuple(contacts)
+        self.potentials = (self.body_potential, *self.loads, *self.contacts)
         self.fixed_dofs = self._resolve_fixed(fixed)
+        self.driven = self._resolve_driven(driven)
         free = np.ones(self.ndofs, dtype=bool)
         free[self.fixed_dofs] = False
+        for _, _, dofs in self.driven:
+            free[dofs] = False
         self.free = free
         # a Model is immutable: its arrays are read-only views for everyone
         for arr in (self.free, self.fixed_dofs):
@@ -125,8 +156,139 @@ class Model:
 
     # energy: every term through the Potential protocol ----------------------------
     def _scaled_terms(self, load_factor: float):
-        """(potential, factor) pairs: the body at 1, each load at the load factor."""
-        return [(self.body_potential, 1.0)] + [(load, load_factor) for load in self.loads]
+        """(potential, factor) pairs: the body and contacts at 1, each load at the load factor."""
+        return (
+            [(self.body_potential, 1.0)]
+            + [(load, load_factor) for load in self.loads]
+            + [(c, 1.0) for c in self.contacts]
+        )
+
+    @cached_property
+    def total_mass(self) -> float:
+        """Mass of the body (kg)."""
+        return float(self.lumped_mass[0::3].sum())
+
+    @cached_property
+    def rest_stiffness(self) -> sp.csr_matrix:
+        """Body stiffness K_0 at the reference configuration (N/m), on first use."""
+        return self.body_potential.hessian(self.X, project=False)
+
+    def kinetic_energy(self, v: np.ndarray, mass: str = "lumped") -> float:
+        """1/2 v^T M v (J) with the lumped or consistent mass."""
+        if mass == "lumped":
+            return 0.5 * float(np.dot(self.lumped_mass * v, v))
+        return 0.5 * float(v @ (self.mass_matrix @ v))
+
+    def linear_momentum(self, v: np.ndarray) -> np.ndarray:
+        """Total linear momentum (kg m/s), ``(3,)``; the same for lumped and consistent mass."""
+        return (self.lumped_mass * v).reshape(-1, 3).sum(axis=0)
+
+    def angular_momentum(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Angular momentum about the origin (kg m^2/s), ``(3,)``, with the lumped mass."""
+        p = (self.lumped_mass * v).reshape(-1, 3)
+        return np.cross(x.reshape(-1, 3), p).sum(axis=0)
+
+    # dissipation ----------------------------------------------------------------
+    def damping_force(self, x: np.ndarray, v: np.ndarray, mass: str = "lumped") -> np.ndarray | None:
+        """The damping force (N), ``(ndofs,)``, or None when the model has no damping.
+
+        Rayleigh ``-(alpha M + beta K_0) v`` plus the body's own dashpots
+        (a mass-spring body's ``k_d``), if any.
+        """
+        f = None
+        if self.damping is not None and (self.damping.alpha or self.damping.beta):
+            f = np.zeros(self.ndofs)
+            if self.damping.alpha:
+                mv = self.lumped_mass * v if mass == "lumped" else self.mass_matrix @ v
+                f -= self.damping.alpha * mv
+            if self.damping.beta:
+                f -= self.damping.beta * (self.rest_stiffness @ v)
+        body_damping = getattr(self.body_potential, "damping_force", None)
+        if body_damping is not None:
+            fb = body_damping(x, v)
+            if fb is not None and np.any(fb):
+                f = fb.copy() if f is None else f + fb
+        return f
+
+    def damping_matrix(self, x: np.ndarray, mass: str = "consistent") -> sp.csr_matrix | None:
+        """C (N s/m) with damping force ``-C v``, or None when the model has no damping."""
+        C = None
+        if self.damping is not None and (self.damping.alpha or self.damping.beta):
+            M = sp.diags(self.lumped_mass) if mass == "lumped" else self.mass_matrix
+            C = self.damping.alpha * M + self.damping.beta * self.rest_stiffness
+        body_matrix = getattr(self.body_potential, "damping_matrix", None)
+        if body_matrix is not None:
+            Cb = body_matrix(x)
+            if Cb is not None:
+                C = Cb if C is None else C + Cb
+        return None if C is None else sp.csr_matrix(C)
+
+    # contact and driven boundaries ---------------------------------------------------
+    def respond_contacts(self, x: np.ndarray, v: np.ndarray):
+        """Apply the obstacles' impulse responses (for ``method="impulse"``); returns (x, v)."""
+        for obstacle in self.obstacles:
+            if getattr(obstacle, "method", None) == "impulse":
+                x, v = obstacle.respond(x, v, self.lumped_mass[0::3])
+        return x, v
+
+    def constraints(self, t: float):
+        """DOFs held at time ``t`` (s), their positions (m) and velocities (m/s).
+
+        Fixed DOFs sit at the reference position at rest; driven ones follow
+        their motion until its release time.
+        """
+        dofs = [self.fixed_dofs]
+        xs = [self.X[self.fixed_dofs]]
+        vs = [np.zeros(self.fixed_dofs.size)]
+        for motion, nodes_X, ndofs in self.driven:
+            if motion.active(t):
+                dofs.append(ndofs.ravel())
+                xs.append((nodes_X + motion.displacement(nodes_X, t)).ravel())
+                vs.append(np.asarray(motion.velocity(nodes_X, t), dtype=float).ravel())
+        return np.concatenate(dofs), np.concatenate(xs), np.concatenate(vs)
+
+    def free_at(self, t: float) -> np.ndarray:
+        """``(ndofs,)`` bool: True for the DOFs that move freely at time ``t`` (s)."""
+        free = np.ones(self.ndofs, dtype=bool)
+        free[self.constraints(t)[0]] = False
+        return free
+
+    def driving(self, t: float) -> bool:
+        """Whether a driven boundary is still held (so an energy source is acting) at ``t``."""
+        return any(motion.active(t) for motion, _, _ in self.driven)
+
+    def _check_damping(self, damping):
+        if damping is None:
+            return None
+        if not (hasattr(damping, "alpha") and hasattr(damping, "beta")):
+            raise InvalidParameter(f"damping must be fe.Rayleigh(alpha, beta) or None, got {damping!r}.")
+        return damping
+
+    @staticmethod
+    def _check_obstacles(ground):
+        if ground is None:
+            return ()
+        obstacles = tuple(ground) if isinstance(ground, (list, tuple)) else (ground,)
+        for ob in obstacles:
+            if not (hasattr(ob, "build") and hasattr(ob, "respond")):
+                raise InvalidParameter(
+                    f"ground must be an obstacle such as fe.Ground(z=0.0), fe.Sphere(...) or "
+                    f"fe.Box(...), or a list of them; got {ob!r}."
+                )
+        return obstacles
+
+    def _resolve_driven(self, driven):
+        out = []
+        for name, motion in (driven or {}).items():
+            if not (hasattr(motion, "displacement") and hasattr(motion, "active")):
+                raise InvalidParameter(
+                    f"driven[{name!r}] must be a motion such as fe.Twist(angle, duration) or "
+                    f"fe.Translate(offset, duration), got {motion!r}."
+                )
+            dofs = self._resolve_fixed(name, what="driven").reshape(-1, 3)
+            nodes_X = self.X[dofs]
+            out.append((motion, nodes_X, dofs))
+        return tuple(out)
 
     def external_force(self, load_factor: float = 1.0) -> np.ndarray:
         """Sum of the dead loads' nodal forces (N), ``(ndofs,)``."""
@@ -183,7 +345,7 @@ class Model:
         return g, H
 
     # supports -----------------------------------------------------------------
-    def _resolve_fixed(self, fixed) -> np.ndarray:
+    def _resolve_fixed(self, fixed, what: str = "fixed") -> np.ndarray:
         mesh, space = self.mesh, self.space
         nv = mesh.p.shape[1]
         if fixed is None or (not isinstance(fixed, str) and np.size(fixed) == 0):
@@ -194,7 +356,7 @@ class Model:
         if names is not None:
             dofs = []
             for name in names:
-                facets = boundary_facets(mesh, name, what="fixed")
+                facets = boundary_facets(mesh, name, what=what)
                 dofs.append(space.node_dofs(space.scalar_basis.get_dofs(facets).all()))
             return np.unique(np.concatenate(dofs)).astype(np.int64)
         arr = np.asarray(fixed)
@@ -233,14 +395,15 @@ class Model:
         B = self.space.rigid_body_modes()
         size = np.ptp(self.X.reshape(-1, 3), axis=0).max()
         B[:, 3:] /= size  # rotations in the same units as translations
-        if self.fixed_dofs.size == 0:
+        held = np.flatnonzero(~self.free)
+        if held.size == 0:
             raise UnderConstrained(
                 "the model fixes nothing, so it can translate and rotate freely and a static "
                 "problem has no unique solution. Fix a boundary, e.g. fe.Model(..., fixed='left'), "
                 "or vertex indices, or simulate the dynamics instead."
             )
         # svd returns min(n_fixed, 6) values: count the rank, not the small values
-        s = np.linalg.svd(B[self.fixed_dofs], compute_uv=False)
+        s = np.linalg.svd(B[held], compute_uv=False)
         free_modes = 6 - int(np.sum(s > 1e-8 * s[0]))  # relative to the largest: round-off level
         if free_modes:
             raise UnderConstrained(

@@ -1,0 +1,125 @@
+"""The integrator interface and what every scheme shares.
+
+An integrator is a small object with one method, ``step(model, state, dt)
+-> State``. It never stores physics (that is the Model's) and keeps only
+its settings, the statistics of its last step (``last_stats``) and, for
+Newmark, the acceleration of the state it produced last (a cache that is
+recomputed whenever it does not match the state given).
+
+For the stability analysis, each scheme also gives its one-step map on the
+damped modal oscillator ``q'' + 2 zeta omega q' + omega^2 q = 0``
+(:meth:`Integrator.step_matrix`); ``fe.critical_time_step`` finds the
+largest dt whose map has spectral radius <= 1 at the model's highest
+frequency.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InvalidParameter
+from ..state import State
+
+__all__ = ["Integrator", "StepStats", "check_dt"]
+
+
+def check_dt(dt) -> float:
+    """``dt`` as a float, or :class:`InvalidParameter` unless it is finite and > 0 (s)."""
+    if isinstance(dt, bool) or not isinstance(dt, (int, float, np.number)) or not math.isfinite(dt) or dt <= 0:
+        raise InvalidParameter(
+            f"the time step dt must be a finite number > 0 (s), got {dt!r}; e.g. dt=1e-3."
+        )
+    return float(dt)
+
+
+@dataclass
+class StepStats:
+    """What one step cost.
+
+    Attributes
+    ----------
+    gradient_evaluations : int
+        Residual (force) evaluations of the model.
+    newton_iterations, line_search_cuts, linear_iterations : int
+        Solver work of implicit schemes (0 for explicit ones).
+    dt_cuts : int
+        Times the step was halved because Newton did not converge.
+    substeps : int
+        Sub-steps the step was finally taken in (1 without cuts).
+    seconds : dict
+        Wall time (s) by stage: ``"linearize"`` (assembly and projection),
+        ``"solve"`` (linear solves), ``"line_search"`` (energy evaluations).
+    """
+
+    gradient_evaluations: int = 0
+    newton_iterations: int = 0
+    line_search_cuts: int = 0
+    linear_iterations: int = 0
+    dt_cuts: int = 0
+    substeps: int = 1
+    seconds: dict = field(default_factory=lambda: {"linearize": 0.0, "solve": 0.0, "line_search": 0.0})
+
+    def add(self, other: "StepStats") -> None:
+        """Accumulate another step's counts into this one."""
+        for name in ("gradient_evaluations", "newton_iterations", "line_search_cuts", "linear_iterations"):
+            setattr(self, name, getattr(self, name) + getattr(other, name))
+        for k, v in other.seconds.items():
+            self.seconds[k] = self.seconds.get(k, 0.0) + v
+
+
+class Integrator:
+    """Base class of the time integrators.
+
+    Attributes
+    ----------
+    explicit : bool
+        True for schemes with a step-size limit (they use the lumped mass and
+        never build a Hessian).
+    order : int
+        Order of accuracy of the scheme.
+    last_stats : StepStats
+        Statistics of the last call to :meth:`step`.
+    """
+
+    explicit: bool = True
+    order: int = 1
+
+    def __init__(self):
+        self.last_stats = StepStats()
+
+    @property
+    def name(self) -> str:
+        """The class name, for reports."""
+        return type(self).__name__
+
+    def __repr__(self) -> str:
+        return f"fe.{self.name}()"
+
+    def step(self, model, state: State, dt: float) -> State:  # pragma: no cover - abstract
+        """Advance ``state`` by ``dt`` (s) and return the new State."""
+        raise NotImplementedError
+
+    def step_matrix(self, h: float, omega: float, zeta: float = 0.0) -> np.ndarray:  # pragma: no cover
+        """One-step map ``(q, v) -> (q, v)`` on ``q'' + 2 zeta omega q' + omega^2 q = 0``."""
+        raise NotImplementedError
+
+    @staticmethod
+    def _oscillator(omega: float, zeta: float) -> np.ndarray:
+        """The first-order system matrix A of the modal oscillator, y = (q, v)."""
+        return np.array([[0.0, 1.0], [-omega * omega, -2.0 * zeta * omega]])
+
+    @staticmethod
+    def _finish(model, x: np.ndarray, v: np.ndarray, t: float) -> State:
+        """Apply impulse contacts, impose the constraints at time t, return the State.
+
+        Constraints come last: a held DOF follows its prescription even if an
+        obstacle would push it.
+        """
+        x, v = model.respond_contacts(x, v)
+        dofs, xc, vc = model.constraints(t)
+        x[dofs] = xc
+        v[dofs] = vc
+        return State(x, v, t)

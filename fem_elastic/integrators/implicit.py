@@ -1,0 +1,292 @@
+"""Implicit Euler as energy minimisation, and its one-Newton-step linearization.
+
+Implicit (backward) Euler, ``v1 = v + h M^-1 f(x1, v1)``, ``x1 = x + h v1``,
+is the minimiser of the incremental potential (see
+:mod:`fem_elastic.integrators.incremental`)
+
+    G(x) = 1/(2 h^2) ||x - (x_n + h v_n)||_M^2 + Pi(x) + 1/(2h) ||x - x_n||_C^2,
+
+found by the Newton solver of the static problem, with backtracking line
+search, to a tolerance (the lecture notes' Algorithm 2). It is
+unconditionally stable and dissipates energy (first order).
+
+Many engines take a single Newton step per time step instead (Baraff and
+Witkin 1998): :class:`LinearizedImplicitEuler`. It costs one assembly and
+one linear solve, and is exact for linear forces; for a corotated body it
+is the stiffness-warping scheme (element stiffness precomputed once,
+rotations from the polar decomposition each step).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+
+import numpy as np
+
+from ..errors import Diverged, InvalidParameter
+from ..newton import _direction, newton_minimize
+from ..state import State
+from .base import Integrator, StepStats, check_dt
+from .incremental import IncrementalPotential
+
+__all__ = ["ImplicitEuler", "LinearizedImplicitEuler"]
+
+log = logging.getLogger(__name__)
+
+
+def _check_mass(mass):
+    if mass not in ("lumped", "consistent"):
+        raise InvalidParameter(f"mass must be 'lumped' or 'consistent', got {mass!r}.")
+    return mass
+
+
+class _Implicit(Integrator):
+    """Shared: constraints at the end of the step and step cutting on failure."""
+
+    explicit = False
+
+    def __init__(self, mass="lumped", max_dt_cuts=4, linear_solver=None):
+        super().__init__()
+        self.mass = _check_mass(mass)
+        if isinstance(max_dt_cuts, bool) or not isinstance(max_dt_cuts, int) or max_dt_cuts < 0:
+            raise InvalidParameter(f"max_dt_cuts must be an integer >= 0, got {max_dt_cuts!r}.")
+        self.max_dt_cuts = max_dt_cuts
+        self.linear_solver = linear_solver
+
+    def step(self, model, state: State, dt: float) -> State:
+        h = check_dt(dt)
+        stats = self.last_stats = StepStats()
+        out, why = self._cut_step(model, state, h, 0, stats)
+        if out is None:
+            raise Diverged(
+                f"{self.name} failed at t = {state.t:.6g} s even after halving dt {self.max_dt_cuts} "
+                f"times (to {h / 2 ** self.max_dt_cuts:.3g} s): {why}. Try a smaller dt, more "
+                "Newton iterations, or a softer/less extreme scene.",
+                time=state.t, reason=why, last_good_state=state,
+            )
+        return out
+
+    def _cut_step(self, model, state, h, depth, stats):
+        """Try one step of h; on failure two of h/2, recursively to max_dt_cuts levels."""
+        out, why = self._try(model, state, h, stats)
+        if out is not None:
+            return out, why
+        if depth >= self.max_dt_cuts:
+            return None, why
+        stats.dt_cuts += 1
+        log.info("%s: step at t=%.6g s with dt=%.3g s failed (%s); halving", self.name, state.t, h, why)
+        mid, why = self._cut_step(model, state, h / 2, depth + 1, stats)
+        if mid is None:
+            return None, why
+        stats.substeps += 1
+        return self._cut_step(model, mid, h / 2, depth + 1, stats)
+
+    @staticmethod
+    def _start(model, state, h):
+        """The held DOFs at t + h, the free mask, and the prescribed values."""
+        dofs, xc, vc = model.constraints(state.t + h)
+        free = np.ones(model.ndofs, dtype=bool)
+        free[dofs] = False
+        return free, dofs, xc, vc
+
+    def _solver_settings(self, model):
+        return dict(
+            linear_solver=self.linear_solver,
+            near_null=model.space.rigid_body_modes(),
+            pattern=model.space.pattern,
+            g_floor=model.gradient_roundoff(),
+        )
+
+
+class ImplicitEuler(_Implicit):
+    """Backward Euler by minimising the incremental potential with Newton.
+
+    Parameters
+    ----------
+    rtol : float
+        Newton stops when the out-of-balance force of G on the free DOFs is
+        below ``rtol`` times the step's force scale (the inertial force
+        ``||M (x0 - y)|| / h^2`` of the first guess, or the external load),
+        or at the round-off floor.
+    max_iter : int
+        Most Newton iterations per (sub-)step.
+    mass : {"lumped", "consistent"}
+        Mass matrix in the inertia term.
+    max_dt_cuts : int
+        When Newton fails, the step is retried as two halves, recursively
+        up to this many times; then :class:`fe.Diverged` is raised.
+    project : bool
+        PSD-projected Hessian away from the solution (see :mod:`fem_elastic.newton`).
+    linear_solver : object, optional
+        ``fe.DirectSolver()``, ``fe.AMGSolver()``, default ``fe.AutoSolver()``.
+
+    Examples
+    --------
+    >>> import fem_elastic as fe
+    >>> model = fe.Model(fe.beam_mesh(cells=(4, 1, 1)), density=1000.0,
+    ...                  body=fe.ElasticBody(fe.NeoHookean(E=1e5, nu=0.3)),
+    ...                  fixed="left", gravity=(0, 0, -9.81))
+    >>> ie = fe.ImplicitEuler()
+    >>> s = ie.step(model, fe.State.rest(model), 0.01)
+    >>> s.t, ie.last_stats.newton_iterations > 0
+    (0.01, True)
+    """
+
+    order = 1
+
+    def __init__(self, rtol=1e-8, max_iter=30, mass="lumped", max_dt_cuts=4, project=True,
+                 linear_solver=None):
+        super().__init__(mass, max_dt_cuts, linear_solver)
+        if not (isinstance(rtol, (int, float)) and 0 < rtol < 1):
+            raise InvalidParameter(f"rtol must be in (0, 1), got {rtol!r}.")
+        if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 1:
+            raise InvalidParameter(f"max_iter must be an integer >= 1, got {max_iter!r}.")
+        self.rtol, self.max_iter, self.project = float(rtol), max_iter, bool(project)
+
+    def _objective(self, model, state, h):
+        return IncrementalPotential(model, state.x + h * state.v, h, self.mass, state.x)
+
+    def _velocity(self, state, x1, h):
+        return (x1 - state.x) / h
+
+    def _try(self, model, state, h, stats):
+        free, dofs, xc, vc = self._start(model, state, h)
+        G = self._objective(model, state, h)
+        # first guess: the inertial prediction; if it inverts an element, the old positions
+        x0 = G.y.copy()
+        x0[dofs] = xc
+        if not math.isfinite(G.energy(x0)):
+            x0 = state.x.copy()
+            x0[dofs] = xc
+            if not math.isfinite(G.energy(x0)):
+                return None, "the prescribed boundary motion inverts an element in one step"
+        scale = G.scale(x0)
+        res = newton_minimize(
+            G.energy, G.linearize, x0, free, rtol=self.rtol, g_scale=scale if scale > 0 else None,
+            max_iter=self.max_iter, energy_roundoff=model.energy_roundoff(), project=self.project,
+            **self._solver_settings(model),
+        )
+        stats.newton_iterations += res.iterations
+        stats.gradient_evaluations += res.iterations + 1
+        stats.line_search_cuts += res.line_search_cuts
+        stats.linear_iterations += res.linear_iterations
+        for k, v in res.seconds.items():
+            stats.seconds[k] = stats.seconds.get(k, 0.0) + v
+        if not res.converged:
+            return None, f"Newton did not converge ({res.message})"
+        x1 = res.x
+        v1 = self._velocity(state, x1, h)
+        return self._finish(model, x1, v1, state.t + h), ""
+
+    def step_matrix(self, h, omega, zeta=0.0):
+        return np.linalg.inv(np.eye(2) - h * self._oscillator(omega, zeta))
+
+
+class LinearizedImplicitEuler(_Implicit):
+    """Implicit Euler with one Newton step per time step (Baraff and Witkin 1998).
+
+    Solves ``(M / h^2 + K + C / h) dx = -dG/dx`` once from ``x_n`` (held
+    DOFs at their new prescription) and takes ``x1 = x_n + dx`` with no
+    line search. Exact for linear forces; for nonlinear ones it is first
+    order with an error that grows with h (compare with :class:`ImplicitEuler`).
+
+    With a :class:`fe.Corotated` body and ``warping=True`` (the default),
+    K and the elastic force come from stiffness warping: the linear element
+    stiffness ``K_e`` is computed once and each step uses
+    ``f_e = -R_e K_e (R_e^T x_e - X_e)``, ``K = sum R_e K_e R_e^T`` with the
+    element rotations ``R_e`` of the polar decomposition of F (the
+    real-time physics notes' corotated FEM). Otherwise K is the model's
+    Hessian at ``x_n``, PSD-projected if ``project``.
+
+    Parameters
+    ----------
+    mass : {"lumped", "consistent"}
+    project : bool
+        Project the tangent to PSD (keeps the system positive definite under compression).
+    warping : bool
+        Use stiffness warping for a corotated body.
+    linear_solver : object, optional
+
+    Examples
+    --------
+    >>> import fem_elastic as fe
+    >>> model = fe.Model(fe.beam_mesh(cells=(4, 1, 1)), density=1000.0,
+    ...                  body=fe.ElasticBody(fe.Corotated(E=1e5, nu=0.3)),
+    ...                  fixed="left", gravity=(0, 0, -9.81))
+    >>> li = fe.LinearizedImplicitEuler()
+    >>> s = li.step(model, fe.State.rest(model), 0.01)
+    >>> li.last_stats.newton_iterations
+    1
+    """
+
+    order = 1
+
+    def __init__(self, mass="lumped", project=True, warping=True, linear_solver=None):
+        super().__init__(mass, 0, linear_solver)
+        self.project, self.warping = bool(project), bool(warping)
+        self._warper = (None, None)
+
+    def _warped(self, model):
+        material = getattr(model.body_potential, "material", None)
+        from ..materials import Corotated
+
+        if not (self.warping and isinstance(material, Corotated)):
+            return None
+        if self._warper[0] is not model:
+            from ..stiffness_warping import WarpedStiffness
+
+            self._warper = (model, WarpedStiffness(model.space, material))
+        return self._warper[1]
+
+    def _try(self, model, state, h, stats):
+        free, dofs, xc, vc = self._start(model, state, h)
+        G = IncrementalPotential(model, state.x + h * state.v, h, self.mass, state.x)
+        x0 = state.x.copy()
+        x0[dofs] = xc
+        t0 = time.perf_counter()
+        warper = self._warped(model)
+        if warper is None:
+            body = None
+        else:  # warped elastic force and stiffness, plus every other term of the model
+            g, K = warper.linearize(x0)
+            for term in model.potentials[1:]:
+                gt, Ht = term.linearize(x0, project=self.project)
+                g = g + gt
+                if Ht is not None:
+                    K = K + Ht
+            body = (g, K)
+        g, H = G.linearize(x0, project=self.project, body=body)
+        stats.seconds["linearize"] += time.perf_counter() - t0
+        stats.gradient_evaluations += 1
+        g = np.where(free, g, 0.0)
+        settings = self._solver_settings(model)
+        dx, _ = _direction(
+            self.linear_solver or _default_solver(), H, g, free, settings["pattern"],
+            settings["near_null"] * free[:, None], stats_proxy := _Seconds(),
+        )
+        stats.seconds["solve"] += stats_proxy.seconds["solve"]
+        stats.linear_iterations += stats_proxy.linear_iterations
+        stats.newton_iterations += 1
+        x1 = x0 + dx
+        if not np.all(np.isfinite(x1)):
+            return None, "the linear solve gave a non-finite update"
+        return self._finish(model, x1, (x1 - state.x) / h, state.t + h), ""
+
+    def step_matrix(self, h, omega, zeta=0.0):
+        return np.linalg.inv(np.eye(2) - h * self._oscillator(omega, zeta))
+
+
+class _Seconds:
+    """The two fields of a NewtonResult that ``newton._direction`` updates."""
+
+    def __init__(self):
+        self.seconds = {"solve": 0.0}
+        self.linear_iterations = 0
+
+
+def _default_solver():
+    from ..linear_solvers import AutoSolver
+
+    return AutoSolver()

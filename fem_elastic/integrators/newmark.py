@@ -1,0 +1,97 @@
+"""Newmark's average-acceleration rule (beta = 1/4, gamma = 1/2).
+
+    x1 = x + h v + h^2/4 (a + a1),      v1 = v + h/2 (a + a1),
+    M a1 = f(x1, v1).
+
+Second order, unconditionally stable, and for a linear undamped system it
+conserves the energy exactly (it is the trapezoidal rule). The new
+positions minimise the incremental potential with ``k = h/2`` and target
+``y = x + h v + h^2/4 a`` (:mod:`fem_elastic.integrators.incremental`), so the
+same Newton solver serves it.
+
+The scheme needs the acceleration of the current state. The integrator
+remembers the acceleration of the state it returned last; given any other
+state (the first one, or one built by the user) it computes ``a`` from
+``M a = f(x, v)`` on the free DOFs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse.linalg as spla
+
+from .implicit import ImplicitEuler
+from .incremental import IncrementalPotential
+
+__all__ = ["Newmark"]
+
+
+class Newmark(ImplicitEuler):
+    """Average-acceleration Newmark (trapezoidal rule), minimised with Newton.
+
+    Parameters are those of :class:`fe.ImplicitEuler`.
+
+    Examples
+    --------
+    >>> import numpy as np, fem_elastic as fe
+    >>> M = fe.Newmark().step_matrix(10.0, 1.0)  # any h: |eigenvalues| = 1 for an undamped mode
+    >>> np.round(abs(np.linalg.eigvals(M)), 12)
+    array([1., 1.])
+    """
+
+    order = 2
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._last = (None, None)  # (state returned last, its acceleration)
+
+    def acceleration(self, model, state) -> np.ndarray:
+        """``a`` (m/s^2) of ``state``: remembered from the last step, else from M a = f."""
+        last_state, a = self._last
+        if last_state is state:
+            return a
+        f = -model.gradient(state.x)
+        fd = model.damping_force(state.x, state.v, self.mass)
+        if fd is not None:
+            f += fd
+        free = model.free_at(state.t)
+        a = np.zeros(model.ndofs)
+        if self.mass == "lumped":
+            a[free] = f[free] / model.lumped_mass[free]
+        else:
+            M = model.mass_matrix[free][:, free].tocsc()
+            a[free] = spla.spsolve(M, f[free])
+        return a
+
+    def _objective(self, model, state, h):
+        a = self.acceleration(model, state)
+        self._a_n = a
+        y = state.x + h * state.v + 0.25 * h * h * a
+        # damping: C v1 = C (v + h/2 a) + (2/h) C (x1 - y) = (1/c) C (x1 - z), c = h/2
+        z = y - 0.5 * h * (state.v + 0.5 * h * a)
+        return IncrementalPotential(model, y, 0.5 * h, self.mass, state.x, z=z, c=0.5 * h)
+
+    def _velocity(self, state, x1, h):
+        a = self._a_n
+        a1 = 4.0 / (h * h) * (x1 - state.x - h * state.v) - a
+        self._a1 = a1
+        return state.v + 0.5 * h * (a + a1)
+
+    def _try(self, model, state, h, stats):
+        out, why = super()._try(model, state, h, stats)
+        if out is None:
+            return out, why
+        impulses = any(getattr(o, "method", "") == "impulse" for o in model.obstacles)
+        if model.driven or impulses:
+            # prescribed motion or contact impulses change (x, v) outside the
+            # scheme: the next step recomputes the acceleration from the forces
+            self._last = (None, None)
+        else:
+            a1 = self._a1
+            a1[~model.free_at(out.t)] = 0.0  # held DOFs do not accelerate
+            self._last = (out, a1)
+        return out, why
+
+    def step_matrix(self, h, omega, zeta=0.0):
+        A = self._oscillator(omega, zeta)
+        return np.linalg.solve(np.eye(2) - 0.5 * h * A, np.eye(2) + 0.5 * h * A)

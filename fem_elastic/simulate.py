@@ -1,0 +1,287 @@
+"""The simulation loop: step, record, watch for blow-up.
+
+``simulate`` advances a State with an integrator, records frames, and stops
+with :class:`fe.Diverged` (carrying the step, time, reason, the last good
+state and the trajectory recorded so far) when
+
+- the state stops being finite,
+- the total energy grows beyond a bound while nothing feeds energy in
+  (no driven boundary is moving the body), or
+- an implicit step fails even after cutting the step.
+
+The energy bound: with ``E_0`` the total energy at the start (or when the
+last driven boundary is released) and ``S`` an energy scale of the scene
+(the largest of the initial kinetic, elastic and load energies and the work
+of gravity over the body's size), the run diverges when ``E > E_0 +
+energy_growth * S``. Damping and implicit schemes only lose energy; a
+symplectic scheme below its stability limit keeps it within a few percent;
+an unstable one multiplies it every step.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+import warnings
+
+import numpy as np
+
+from .errors import Diverged, InvalidParameter
+from .integrators.base import check_dt
+from .state import State
+from .trajectory import Trajectory
+
+__all__ = ["simulate", "StabilityWarning"]
+
+log = logging.getLogger(__name__)
+
+_STAT_FIELDS = ("gradient_evaluations", "newton_iterations", "line_search_cuts",
+                "linear_iterations", "dt_cuts")
+
+
+class StabilityWarning(UserWarning):
+    """An explicit time step above the scheme's stability limit."""
+
+
+def simulate(
+    model,
+    integrator,
+    dt: float,
+    *,
+    t_end: float | None = None,
+    steps: int | None = None,
+    state: State | None = None,
+    record_every: int = 1,
+    progress: bool = False,
+    check_stability: bool = True,
+    energy_growth: float = 1.0,
+    callback=None,
+) -> Trajectory:
+    """Integrate ``model`` in time.
+
+    Parameters
+    ----------
+    model : Model
+    integrator : Integrator
+        e.g. ``fe.ImplicitEuler()`` or ``fe.SymplecticEuler()``.
+    dt : float
+        Time step (s), > 0.
+    t_end : float, optional
+        End time (s); ``round(t_end / dt)`` steps. Give exactly one of ``t_end`` and ``steps``.
+    steps : int, optional
+        Number of steps.
+    state : State, optional
+        Initial state; default ``fe.State.rest(model)``.
+    record_every : int
+        Record a frame every this many steps (the first and last are always recorded).
+    progress : bool
+        Show a tqdm progress bar (needs ``pip install fem_elastic[cli]``).
+    check_stability : bool
+        For explicit schemes, estimate the critical time step
+        (:func:`fe.critical_time_step`) and warn (:class:`StabilityWarning`)
+        when ``dt`` exceeds it.
+    energy_growth : float
+        Divergence bound on the energy growth, in units of the scene's
+        energy scale (see the module notes); ``inf`` switches the check off.
+    callback : callable, optional
+        ``callback(step, state)`` after every step (e.g. to write output);
+        an exception raised there stops the run and propagates.
+
+    Returns
+    -------
+    Trajectory
+
+    Raises
+    ------
+    Diverged
+        With ``step``, ``time``, ``reason``, ``last_good_state`` and
+        ``trajectory`` (the frames recorded up to the last good state).
+
+    Examples
+    --------
+    >>> import fem_elastic as fe
+    >>> model = fe.Model(fe.beam_mesh(cells=(4, 1, 1)), density=1000.0,
+    ...                  body=fe.ElasticBody(fe.NeoHookean(E=1e5, nu=0.3)),
+    ...                  fixed="left", gravity=(0, 0, -9.81))
+    >>> run = fe.simulate(model, fe.ImplicitEuler(), dt=0.01, steps=5)
+    >>> run.times.shape, run.displacement.shape, bool(run.displacement[-1, :, 2].min() < 0)
+    ((6,), (6, 20, 3), True)
+    """
+    h = check_dt(dt)
+    n_steps = _n_steps(h, t_end, steps)
+    if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) or record_every < 1:
+        raise InvalidParameter(f"record_every must be an integer >= 1, got {record_every!r}.")
+    if not (isinstance(energy_growth, (int, float)) and energy_growth > 0):
+        raise InvalidParameter(f"energy_growth must be a number > 0, got {energy_growth!r}.")
+    if not hasattr(integrator, "step"):
+        raise InvalidParameter(
+            f"integrator must be e.g. fe.ImplicitEuler() or fe.SymplecticEuler(), got {integrator!r}."
+        )
+    state = State.rest(model) if state is None else state
+    if state.x.shape != (model.ndofs,):
+        raise InvalidParameter(
+            f"the initial state has {state.x.size} DOFs but the model has {model.ndofs}; "
+            "build it with fe.State.rest(model, ...)."
+        )
+    mass = "lumped" if getattr(integrator, "explicit", True) else getattr(integrator, "mass", "lumped")
+    if check_stability and getattr(integrator, "explicit", False):
+        _warn_if_unstable(model, integrator, h)
+
+    rec = _Recorder(model, mass)
+    stats = {k: np.zeros(n_steps, dtype=np.int64) for k in _STAT_FIELDS}
+    for k in ("seconds_linearize", "seconds_solve", "seconds_line_search", "seconds_step"):
+        stats[k] = np.zeros(n_steps)
+    t_start = time.perf_counter()
+    e_ref, scale = rec.record(state), _energy_scale(model, state, rec)
+    driving = model.driving(state.t)
+    check_every = max(1, min(int(record_every), 10))
+    bar = _progress_bar(n_steps, progress)
+    k = 0
+    try:
+        for k in range(n_steps):
+            t0 = time.perf_counter()
+            try:
+                new = integrator.step(model, state, h)
+            except Diverged as err:
+                raise _diverged(err.reason or str(err), k, state, rec, stats, k, t_start, integrator, h,
+                                str(err)) from err
+            stats["seconds_step"][k] = time.perf_counter() - t0
+            st = integrator.last_stats
+            for name in _STAT_FIELDS:
+                stats[name][k] = getattr(st, name, 0)
+            for name in ("linearize", "solve", "line_search"):
+                stats[f"seconds_{name}"][k] = st.seconds.get(name, 0.0)
+            if not (np.isfinite(new.x).all() and np.isfinite(new.v).all()):
+                raise _diverged("non-finite positions or velocities", k, state, rec, stats, k,
+                                t_start, integrator, h)
+            last = k == n_steps - 1
+            was_driving, driving = driving, model.driving(new.t)
+            record = (k + 1) % record_every == 0 or last
+            if record or (k + 1) % check_every == 0:
+                e = rec.energies(new)
+                if not math.isfinite(e[2]):
+                    raise _diverged("the energy is not finite (an inverted element?)", k, state, rec,
+                                    stats, k, t_start, integrator, h)
+                if was_driving and not driving:  # released: the energy from here on is the budget
+                    e_ref, scale = e[2], max(scale, abs(e[2]))
+                elif not driving and e[2] > e_ref + energy_growth * scale:
+                    raise _diverged(
+                        f"the total energy grew from {e_ref:.6g} J to {e[2]:.6g} J (more than "
+                        f"{energy_growth:g} x the scene's energy scale {scale:.3g} J) with no "
+                        "energy source", k, state, rec, stats, k, t_start, integrator, h,
+                    )
+                if record:
+                    rec.record(new, e)
+            state = new
+            if callback is not None:
+                callback(k, state)
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    traj = rec.trajectory(stats, n_steps, time.perf_counter() - t_start, integrator, h, state)
+    traj.message = f"completed {n_steps} steps to t = {state.t:.6g} s"
+    log.info("%s: %s in %.3g s", integrator.name if hasattr(integrator, "name") else integrator,
+             traj.message, traj.wall_time)
+    return traj
+
+
+def _n_steps(h, t_end, steps):
+    if (t_end is None) == (steps is None):
+        raise InvalidParameter("give exactly one of t_end (s) and steps, e.g. t_end=1.0.")
+    if steps is not None:
+        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+            raise InvalidParameter(f"steps must be an integer >= 1, got {steps!r}.")
+        return int(steps)
+    if isinstance(t_end, bool) or not isinstance(t_end, (int, float)) or not math.isfinite(t_end) or t_end <= 0:
+        raise InvalidParameter(f"t_end must be a finite time > 0 (s), got {t_end!r}.")
+    n = int(round(t_end / h))
+    if n < 1:
+        raise InvalidParameter(f"t_end = {t_end} s is shorter than one step dt = {h} s.")
+    return n
+
+
+def _warn_if_unstable(model, integrator, h):
+    from .modal import critical_time_step
+
+    try:
+        dt_crit = critical_time_step(model, integrator)
+    except Exception as err:  # an estimate failing must not stop a run; say so
+        log.warning("could not estimate the critical time step: %s", err)
+        return
+    if h > dt_crit:
+        if dt_crit == 0.0:
+            msg = (f"{integrator.name} is unstable at every time step on an undamped body (its "
+                   "energy grows each step); add damping (fe.Rayleigh) or use fe.SymplecticEuler.")
+        else:
+            msg = (f"dt = {h:.4g} s exceeds {integrator.name}'s critical time step "
+                   f"{dt_crit:.4g} s (from the highest natural frequency): expect a blow-up. "
+                   f"Use dt <= {dt_crit:.4g} s or an implicit integrator.")
+        warnings.warn(msg, StabilityWarning, stacklevel=3)
+
+
+def _energy_scale(model, state, rec):
+    ke, pe, _ = rec.energies(state)
+    el = model.body_potential.energy(state.x)
+    scale = max(abs(ke), abs(pe), abs(el) if math.isfinite(el) else 0.0)
+    if model.loads:  # the work of the loads over the body's size
+        size = float(np.ptp(model.X.reshape(-1, 3), axis=0).max())
+        scale = max(scale, float(np.abs(model.external_force()).sum()) * size)
+    return max(scale, 1e3 * model.energy_roundoff())
+
+
+class _Recorder:
+    def __init__(self, model, mass):
+        self.model, self.mass = model, mass
+        self.frames = []
+
+    def energies(self, state):
+        ke = self.model.kinetic_energy(state.v, self.mass)
+        pe = self.model.energy(state.x)
+        return ke, pe, ke + pe
+
+    def record(self, state, e=None):
+        e = self.energies(state) if e is None else e
+        m = self.model
+        self.frames.append((
+            state.t, m.to_vertices(state.x - m.X), m.to_vertices(state.v), e[0], e[1],
+            m.linear_momentum(state.v), m.angular_momentum(state.x, state.v),
+        ))
+        return e[2]
+
+    def trajectory(self, stats, n, wall, integrator, h, state):
+        cols = list(zip(*self.frames))
+        kin, pot = np.array(cols[3]), np.array(cols[4])
+        return Trajectory(
+            times=np.array(cols[0]), displacement=np.array(cols[1]), velocity=np.array(cols[2]),
+            kinetic=kin, potential=pot, total=kin + pot, linear_momentum=np.array(cols[5]),
+            angular_momentum=np.array(cols[6]), step_stats={k: v[:n] for k, v in stats.items()},
+            wall_time=wall, steps=n, dt=h, integrator=getattr(integrator, "name", str(integrator)),
+            final_state=state,
+        )
+
+
+def _diverged(reason, k, state, rec, stats, n_done, t_start, integrator, h, detail=None):
+    traj = rec.trajectory(stats, n_done, time.perf_counter() - t_start, integrator, h, state)
+    traj.message = f"diverged at step {k}: {reason}"
+    err = Diverged(
+        f"the simulation diverged at step {k} (t = {state.t:.6g} s): {detail or reason}. The last "
+        "good state and the frames recorded so far are attached (err.last_good_state, "
+        "err.trajectory). Try a smaller dt, an implicit integrator (fe.ImplicitEuler), or damping.",
+        step=k, time=state.t, reason=reason, last_good_state=state,
+    )
+    err.trajectory = traj
+    return err
+
+
+def _progress_bar(n, progress):
+    if not progress:
+        return None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:
+        log.warning("progress=True needs tqdm (pip install fem_elastic[cli]); running without a bar")
+        return None
+    return tqdm(total=n, unit="step", desc="simulate")

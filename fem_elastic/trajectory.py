@@ -1,0 +1,87 @@
+"""The record of a simulation: a Trajectory.
+
+Frames are recorded every ``record_every`` steps (and at the end); the
+per-step solver statistics are kept for every step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Trajectory"]
+
+
+@dataclass
+class Trajectory:
+    """What :func:`fe.simulate` recorded.
+
+    Attributes
+    ----------
+    times : numpy.ndarray
+        ``(T,)`` times of the recorded frames (s).
+    displacement, velocity : numpy.ndarray
+        ``(T, n_vertices, 3)`` vertex displacements (m) and velocities (m/s).
+    kinetic, potential, total : numpy.ndarray
+        ``(T,)`` energies (J): ``1/2 v^T M v`` with the integrator's mass,
+        the model's total potential energy (elastic, loads, contact), and their sum.
+    linear_momentum, angular_momentum : numpy.ndarray
+        ``(T, 3)`` (kg m/s) and about the origin (kg m^2/s), with the lumped mass.
+    step_stats : dict of numpy.ndarray
+        Per step ``(steps,)``: ``gradient_evaluations``, ``newton_iterations``,
+        ``line_search_cuts``, ``linear_iterations``, ``dt_cuts``, and
+        ``seconds_linearize``, ``seconds_solve``, ``seconds_line_search``, ``seconds_step``.
+    wall_time : float
+        Wall time of the whole run (s), recording included.
+    steps : int
+        Steps taken.
+    dt : float
+        Time step (s).
+    integrator : str
+        The integrator's name.
+    final_state : State
+        The state after the last step taken.
+    message : str
+        How the run ended.
+    """
+
+    times: np.ndarray
+    displacement: np.ndarray
+    velocity: np.ndarray
+    kinetic: np.ndarray
+    potential: np.ndarray
+    total: np.ndarray
+    linear_momentum: np.ndarray
+    angular_momentum: np.ndarray
+    step_stats: dict = field(default_factory=dict)
+    wall_time: float = 0.0
+    steps: int = 0
+    dt: float = 0.0
+    integrator: str = ""
+    final_state: object = None
+    message: str = ""
+
+    @property
+    def dt_cuts(self) -> int:
+        """Steps that had to be cut (Newton failed at the full dt)."""
+        return int(np.count_nonzero(self.step_stats.get("dt_cuts", np.zeros(0))))
+
+    def summary(self) -> dict:
+        """The run's figures as plain Python values (for JSON)."""
+        st = self.step_stats
+        out = {
+            "integrator": self.integrator,
+            "dt": self.dt,
+            "steps": self.steps,
+            "frames": int(self.times.size),
+            "t_end": float(self.times[-1]) if self.times.size else 0.0,
+            "wall_time": self.wall_time,
+            "energy_initial": float(self.total[0]) if self.total.size else None,
+            "energy_final": float(self.total[-1]) if self.total.size else None,
+            "message": self.message,
+            "steps_cut": self.dt_cuts,
+        }
+        for k, v in st.items():
+            out[f"{k}_total"] = float(np.sum(v))
+        return out
