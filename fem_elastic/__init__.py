@@ -14,7 +14,21 @@ imported inside the I/O functions, pyamg inside the AMG solver.
 """
 
 from .analytic import RectangularCantilever
+from .contact import Box, Ground, Obstacle, Sphere
+from .damping import Rayleigh
+from .driven import Motion, Prescribed, Translate, Twist
 from .elastic_body import ElasticBody, ElasticPotential
+from .integrators import (
+    RK4,
+    ExplicitEuler,
+    ImplicitEuler,
+    Integrator,
+    LinearizedImplicitEuler,
+    Midpoint,
+    Newmark,
+    StepStats,
+    SymplecticEuler,
+)
 from .errors import (
     Diverged,
     FemElasticError,
@@ -45,11 +59,20 @@ from .mesh import (
 )
 from .model import Model
 from .potential import LinearPotential, Potential
+from .simulate import StabilityWarning, simulate
+from .springs import MassSpring, SpringPotential, lloyd_stiffness, van_gelder_stiffness
+from .state import State
 from .static import StaticResult, solve_static
+from .trajectory import Trajectory
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "MassSpring", "SpringPotential", "lloyd_stiffness", "van_gelder_stiffness",
+    "Box", "Ground", "Obstacle", "Sphere",
+    "ExplicitEuler", "ImplicitEuler", "Integrator", "LinearizedImplicitEuler", "Midpoint", "Motion",
+    "Newmark", "Prescribed", "RK4", "Rayleigh", "StabilityWarning", "State", "StepStats",
+    "SymplecticEuler", "Trajectory", "Translate", "Twist", "simulate",
     "AMGSolver", "AutoSolver", "Corotated", "DirectSolver", "Diverged", "ElasticBody",
     "ElasticPotential", "FemElasticError", "InvalidMesh", "InvalidParameter", "LinearElastic",
     "LinearPotential", "Material", "Model", "NeoHookean", "NotConverged", "Potential",
