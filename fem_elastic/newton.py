@@ -113,6 +113,7 @@ def newton_minimize(
     max_cuts: int = 30,
     project: bool = True,
     g_floor: float = 0.0,
+    gradient: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> NewtonResult:
     """Minimise ``energy`` from ``x0`` over the free DOFs.
 
@@ -157,6 +158,11 @@ def newton_minimize(
         g_floor and the Newton step predicts an energy decrease below the
         energy's round-off: no iterate can then be told apart from the
         solution.
+    gradient : callable, optional
+        x -> gradient alone. When given, each iterate after the first is
+        first tested for convergence with the gradient only, so the
+        converged iterate costs no Hessian assembly (a linear problem then
+        takes one assembly instead of two).
 
     Returns
     -------
@@ -175,7 +181,13 @@ def newton_minimize(
     exact = not project  # use the exact Hessian this iteration
     for it in range(max_iter + 1):
         t0 = time.perf_counter()
-        g, H = linearize(x, not exact)
+        need_hessian = True
+        if gradient is not None and it > 0:  # test convergence before assembling a Hessian
+            g = gradient(x)
+            gnorm = float(np.linalg.norm(g[free]))
+            need_hessian = math.isfinite(gnorm) and gnorm > rtol * g_scale and it < max_iter
+        if need_hessian:
+            g, H = linearize(x, not exact)
         result.seconds["linearize"] += time.perf_counter() - t0
         g = np.where(free, g, 0.0)
         gnorm = float(np.linalg.norm(g))

@@ -170,6 +170,7 @@ def solve_static(
             energy_roundoff=e_noise,
             project=project,
             g_floor=g_floor,
+            gradient=lambda y: model.gradient(y, target),
         )
         total.iterations += res.iterations
         total.residual_history.extend(res.residual_history)

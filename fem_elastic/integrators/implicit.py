@@ -166,7 +166,7 @@ class ImplicitEuler(_Implicit):
         res = newton_minimize(
             G.energy, G.linearize, x0, free, rtol=self.rtol, g_scale=scale if scale > 0 else None,
             max_iter=self.max_iter, energy_roundoff=model.energy_roundoff(), project=self.project,
-            **self._solver_settings(model),
+            gradient=G.gradient, **self._solver_settings(model),
         )
         stats.newton_iterations += res.iterations
         stats.gradient_evaluations += res.iterations + 1
