@@ -48,6 +48,7 @@ from .materials import (
     StVK,
     lame_parameters,
 )
+from .modal import critical_time_step, max_frequency, natural_frequencies
 from .mesh import (
     beam_mesh,
     mesh_from_arrays,
@@ -62,12 +63,14 @@ from .potential import LinearPotential, Potential
 from .simulate import StabilityWarning, simulate
 from .springs import MassSpring, SpringPotential, lloyd_stiffness, van_gelder_stiffness
 from .state import State
+from .stiffness_warping import WarpedStiffness
 from .static import StaticResult, solve_static
 from .trajectory import Trajectory
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "critical_time_step", "max_frequency", "natural_frequencies", "WarpedStiffness",
     "MassSpring", "SpringPotential", "lloyd_stiffness", "van_gelder_stiffness",
     "Box", "Ground", "Obstacle", "Sphere",
     "ExplicitEuler", "ImplicitEuler", "Integrator", "LinearizedImplicitEuler", "Midpoint", "Motion",
