@@ -1,0 +1,111 @@
+"""simulate: recording, blow-up reporting, step cutting, bodies and progress."""
+
+import logging
+
+import numpy as np
+import pytest
+
+import fem_elastic as fe
+
+
+@pytest.fixture(scope="module")
+def sagging():
+    mesh = fe.beam_mesh(length=1.0, width=0.1, height=0.1, cells=(6, 1, 1))
+    return fe.Model(mesh, density=1000.0, body=fe.ElasticBody(fe.NeoHookean(E=1e5, nu=0.3)),
+                    fixed="left", gravity=(0, 0, -9.81))
+
+
+def test_implicit_failure_after_cuts_is_diverged_with_what_was_recorded(sagging):
+    # one Newton iteration cannot converge on this nonlinear sag: cut once, then give up
+    integ = fe.ImplicitEuler(max_iter=1, max_dt_cuts=1)
+    with pytest.raises(fe.Diverged) as info:
+        fe.simulate(sagging, integ, 0.05, steps=10)
+    err = info.value
+    assert err.step == 0 and err.time == 0.0
+    assert "Newton did not converge" in err.reason
+    assert err.trajectory.times.tolist() == [0.0]  # the initial frame survives
+    assert np.array_equal(err.last_good_state.x, sagging.X)
+
+
+def test_step_cutting_rescues_a_hard_step(sagging):
+    integ = fe.ImplicitEuler(max_iter=4, max_dt_cuts=6)
+    run = fe.simulate(sagging, integ, 0.2, steps=3)
+    assert run.dt_cuts >= 1  # some step needed halving...
+    assert np.isfinite(run.total).all()  # ...and the run went on
+    assert run.times[-1] == pytest.approx(0.6)
+
+
+def test_non_finite_state_is_diverged(sagging):
+    class Broken(fe.SymplecticEuler):
+        def step(self, model, state, dt):
+            s = super().step(model, state, dt)
+            if s.t > 2.5 * dt:
+                x = s.x.copy()
+                x[0] = np.nan
+                return fe.State(x, s.v, s.t)
+            return s
+
+    with pytest.raises(fe.Diverged, match="non-finite") as info:
+        fe.simulate(sagging, Broken(), 1e-4, steps=10, check_stability=False)
+    assert info.value.step == 2
+    assert info.value.trajectory.times.size == 3
+
+
+def test_linearized_implicit_euler_with_corotated_uses_stiffness_warping():
+    """One warped Newton step per time step: close to converged implicit Euler for a small
+    step (their difference is the linearization error, O(h^2) per step)."""
+    mesh = fe.beam_mesh(length=1.0, width=0.1, height=0.1, cells=(6, 1, 1))
+    model = fe.Model(mesh, density=1000.0, body=fe.ElasticBody(fe.Corotated(E=1e5, nu=0.3)),
+                     fixed="left", gravity=(0, 0, -9.81))
+    li = fe.LinearizedImplicitEuler()
+    diffs = []
+    for dt in (0.02, 0.01):
+        a = fe.simulate(model, li, dt, t_end=0.2)
+        b = fe.simulate(model, fe.ImplicitEuler(), dt, t_end=0.2)
+        diffs.append(np.abs(a.displacement[-1] - b.displacement[-1]).max())
+    assert li._warper[1] is not None  # the warped stiffness was used
+    assert (li.last_stats.newton_iterations, li.last_stats.dt_cuts) == (1, 0)
+    # halving dt at least halves the gap (O(h) globally, measured ratio ~ 3)
+    assert diffs[1] < 0.6 * diffs[0], diffs
+    assert diffs[1] < 0.05 * np.abs(b.displacement[-1]).max()
+
+
+def test_mass_spring_body_simulates_and_its_dashpots_dissipate():
+    mesh = fe.beam_mesh(length=0.3, width=0.1, height=0.1, cells=(3, 1, 1))
+    s0 = None
+    totals = {}
+    for k_d in (0.0, 10.0):
+        model = fe.Model(mesh, density=1000.0, body=fe.MassSpring(E=1e5, k_d=k_d), fixed="left")
+        if s0 is None:
+            s0 = fe.State.rest(model, velocity=lambda X: np.c_[0 * X[:, 0], 0 * X[:, 0], X[:, 0]])
+        for integ in (fe.SymplecticEuler(), fe.ImplicitEuler()):
+            dt = 0.5 * fe.critical_time_step(model, fe.SymplecticEuler())
+            run = fe.simulate(model, integ, dt, steps=100, state=s0)
+            totals[k_d, integ.name] = run.total
+    # dashpots only remove energy: the damped run ends lower than the undamped one
+    for name in ("SymplecticEuler", "ImplicitEuler"):
+        assert totals[10.0, name][-1] < 0.8 * totals[0.0, name][-1]
+    assert np.all(np.diff(totals[10.0, "ImplicitEuler"]) <= 1e-9 * totals[10.0, "ImplicitEuler"][0])
+
+
+def test_p2_trajectory_is_at_the_vertices_and_callback_sees_every_step():
+    mesh = fe.beam_mesh(cells=(2, 1, 1))
+    model = fe.Model(mesh, density=1000.0, body=fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3), order=2),
+                     fixed="left", gravity=(0, 0, -9.81))
+    seen = []
+    run = fe.simulate(model, fe.Newmark(), 1e-3, steps=4, callback=lambda k, s: seen.append((k, s.t)))
+    assert run.displacement.shape == (5, mesh.p.shape[1], 3)
+    assert [k for k, _ in seen] == [0, 1, 2, 3]
+    assert seen[-1][1] == pytest.approx(4e-3)
+    summary = run.summary()
+    assert summary["integrator"] == "Newmark" and summary["steps"] == 4
+
+
+def test_progress_bar_and_logging(sagging, capsys, caplog):
+    with caplog.at_level(logging.INFO, logger="fem_elastic"):
+        fe.simulate(sagging, fe.ImplicitEuler(), 0.01, steps=3, progress=True)
+    err = capsys.readouterr().err
+    assert "3/3" in err  # tqdm writes its bar to stderr
+    assert any("completed 3 steps" in r.getMessage() for r in caplog.records)
+    fe.simulate(sagging, fe.ImplicitEuler(), 0.01, steps=2)
+    assert "2/2" not in capsys.readouterr().err  # no bar unless asked
