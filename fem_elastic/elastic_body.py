@@ -97,7 +97,17 @@ class ElasticPotential(Potential):
         """psi at the quadrature points (J/m^3), ``(nelems, nqp)``."""
         return self.material.psi(self.F(x))
 
+    def _fused(self):
+        """The fused numba kernels of :mod:`fem_elastic.fused` (P1, registered
+        materials, numba importable, ``FEM_ELASTIC_NUMBA`` not 0), or None: numpy path."""
+        from . import fused  # numba itself is imported there, on first use only
+
+        return fused.kernels_for(self.material, self.space)
+
     def energy(self, x: np.ndarray) -> float:
+        kernels = self._fused()
+        if kernels is not None:
+            return kernels.energy(x)  # one pass over the elements, no temporaries
         with np.errstate(invalid="ignore", divide="ignore"):
             psi = self.energy_density(x)
         if not np.all(np.isfinite(psi)):
@@ -136,6 +146,9 @@ class ElasticPotential(Potential):
         return float(eps * (2.0 * m.mu + abs(m.lam)) * np.sqrt(3.0) * np.linalg.norm(per_node))
 
     def gradient(self, x: np.ndarray) -> np.ndarray:
+        kernels = self._fused()
+        if kernels is not None:
+            return kernels.gradient(x)  # gather, F, P and scatter fused per element
         return self._force(self.material.dpsi_dF(self.F(x)))
 
     def hessian(self, x: np.ndarray, project: bool = False) -> sp.csr_matrix:

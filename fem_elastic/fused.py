@@ -1,0 +1,274 @@
+"""Fused numba kernels for the elastic energy and force of linear (P1) tets.
+
+The numpy path of :class:`fem_elastic.elastic_body.ElasticPotential` builds
+the deformation gradient of every element, then the stress of every
+element, then the element forces, each as a ``(3, 3, nelems)`` or
+``(12, nelems)`` array: on 150k tets most of its time goes to writing and
+re-reading those temporaries. Here one pass over the elements does it all
+for P1 tets, whose shape-function gradients ``dN`` are constant per element:
+
+    F_e = I + sum_a u_a (x) dN_a,      P_e = P(F_e),      g_{a i} += V_e P_e,ij dN_a,j
+
+(``u = x - X``, ``V_e`` the element volume), accumulating the force straight
+into the global vector, and the same loop sums ``V_e psi(F_e)`` for the
+energy, returning ``+inf`` at the first inadmissible element (an inverted
+Neo-Hookean tet) as the numpy path does.
+
+The pointwise materials are re-written as numba functions that repeat the
+numpy modules' formulas in the same order of operations, so both paths
+agree to round-off; the numpy path stays the reference and the fallback.
+:class:`~fem_elastic.materials.Corotated` is not fused: its stress needs
+the polar decomposition (an SVD) of every F, which its numpy module does
+batched; a per-element 3x3 SVD in numba would be a second implementation
+of :mod:`fem_elastic.materials.svd` to keep in step with the first.
+
+The loops are serial (one thread): the scatter-add into the global vector
+needs no coloring or atomics then, results do not depend on a thread count,
+and the rest of a time step (numpy vector updates) is single-threaded too.
+On the 153,600-tet beam of ``scripts/bench_forces.py`` the fused gradient
+takes ~10 ms against ~70 ms on the numpy path.
+
+numba is optional (the ``fast`` extra) and imported on first use only:
+``import fem_elastic`` works without it. Set ``FEM_ELASTIC_NUMBA=0`` in the
+environment to force the numpy path. The kernels are compiled with
+``cache=True``: the first call on a machine compiles them (~3 s), later
+processes load them from ``__pycache__`` (~0.4 s with the import of numba).
+
+Examples
+--------
+>>> import numpy as np
+>>> import fem_elastic as fe
+>>> from fem_elastic.discretization import Discretization
+>>> space = Discretization(fe.beam_mesh(cells=(2, 1, 1)), order=1)
+>>> material = fe.NeoHookean(E=1e6, nu=0.45)
+>>> kernels = kernels_for(material, space)
+>>> kernels is None or kernels.energy(space.X) == 0.0   # None without numba
+True
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import weakref
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .discretization import Discretization
+from .materials import LinearElastic, NeoHookean, StableNeoHookean, StVK
+from .materials.base import Material
+
+__all__ = ["available", "kernels_for", "registry", "FusedP1", "MaterialKernels"]
+
+#: Environment variable that switches the fused kernels off when set to ``0``.
+ENV = "FEM_ELASTIC_NUMBA"
+
+
+def _lame(m: Material) -> tuple[float, float, float]:
+    return (float(m.mu), float(m.lam), 0.0)
+
+
+def _stable_neohookean(m: StableNeoHookean) -> tuple[float, float, float]:
+    return (float(m.mu_snh), float(m.lam_snh), float(m.alpha))
+
+
+#: Material class -> (prefix of its pointwise kernels ``<prefix>_psi`` and
+#: ``<prefix>_P`` in :mod:`._fused_kernels`, the kernels' parameters of a
+#: material). Exact classes only: a subclass may change psi.
+_REGISTRY: dict[type, tuple[str, Callable[[Material], tuple[float, float, float]]]] = {
+    LinearElastic: ("linear", _lame),
+    StVK: ("stvk", _lame),
+    NeoHookean: ("neohookean", _lame),
+    StableNeoHookean: ("stable_neohookean", _stable_neohookean),
+}
+
+log = logging.getLogger(__name__)
+
+_module = None  # the imported kernel module, once loaded
+_import_error: ImportError | None = None
+
+
+def _kernels():
+    """The kernel module (imports numba on the first call), or None if numba is missing."""
+    global _module, _import_error
+    if _module is None and _import_error is None:
+        try:
+            from . import _fused_kernels
+        except ImportError as err:  # numba (or llvmlite) not installed
+            _import_error = err
+            log.info("numba is not importable (%s): the elastic force and energy use numpy", err)
+        else:
+            _module = _fused_kernels
+    return _module
+
+
+def available() -> bool:
+    """Whether the fused kernels are used: numba imports and ``FEM_ELASTIC_NUMBA`` is not ``0``.
+
+    The environment variable is read at every call, so it can be changed at
+    run time (the tests do so to compare both paths).
+
+    Returns
+    -------
+    bool
+
+    Examples
+    --------
+    >>> isinstance(available(), bool)   # False without numba or with FEM_ELASTIC_NUMBA=0
+    True
+    """
+    if os.environ.get(ENV, "1").strip().lower() in ("0", "false", "no", "off"):
+        return False
+    return _kernels() is not None
+
+
+@dataclass(frozen=True)
+class MaterialKernels:
+    """The pointwise numba functions of one material class.
+
+    Attributes
+    ----------
+    kind : int
+        The branch of the element loops that evaluates this material.
+    psi, P : numba functions
+        ``psi(F, prm) -> float`` and ``P(F, prm) -> 9-tuple``, F a row-major 9-tuple.
+    params : callable
+        ``params(material) -> prm``, the 3-tuple of parameters (Pa or 1) the kernels take.
+    """
+
+    kind: int
+    psi: object
+    P: object
+    params: Callable[[Material], tuple[float, float, float]]
+
+
+def registry() -> dict[type, MaterialKernels]:
+    """Material class -> its fused kernels (loads numba); empty without numba.
+
+    Returns
+    -------
+    dict
+
+    Examples
+    --------
+    >>> import fem_elastic as fe
+    >>> fe.Corotated in registry()     # per-element SVD: stays on the numpy path
+    False
+    """
+    k = _kernels()
+    if k is None:
+        return {}
+    return {
+        cls: MaterialKernels(getattr(k, name.upper()), getattr(k, f"{name}_psi"),
+                             getattr(k, f"{name}_P"), params)
+        for cls, (name, params) in _REGISTRY.items()
+    }
+
+
+class _P1Geometry:
+    """What the P1 kernels need of a Discretization, contiguous and element-major.
+
+    Every array is a read-only copy, and :meth:`FusedP1._x` hands x over
+    read-only too: numba compiles one specialization per combination of
+    array flags, so fixing them keeps it to one compile (and one cache entry).
+    """
+
+    def __init__(self, space: Discretization):
+        nodes = space.element_dofs[0::3] // 3  # (4, ne) vertex of each local node
+        # dN is constant on a P1 tet (every quadrature point holds the same values),
+        # and sum_a dN_a = 0: the rows of nodes 1-3 are Dm^-1, F = I + Ds Dm^-1.
+        dx = space.dx
+        self.nodes = _frozen(nodes.T, np.int64)  # (ne, 4)
+        self.Dm_inv = _frozen(space.dN[1:, :, :, 0].transpose(2, 0, 1), float)  # (ne, 3, 3)
+        self.V = _frozen(dx[:, 0] if dx.shape[1] == 1 else dx.sum(axis=1), float)  # (ne,)
+        self.X = _frozen(space.X, float)  # (ndofs,)
+        self.ndofs = space.ndofs
+
+
+def _frozen(a: np.ndarray, dtype) -> np.ndarray:
+    """A C-contiguous, read-only copy."""
+    out = np.array(a, dtype=dtype, order="C", copy=True)
+    out.setflags(write=False)
+    return out
+
+
+#: Discretization -> (its geometry, {material: FusedP1}); dropped with the Discretization.
+_cache: "weakref.WeakKeyDictionary[Discretization, tuple[_P1Geometry, dict]]" = (
+    weakref.WeakKeyDictionary()
+)
+
+
+class FusedP1:
+    """Energy and gradient of one material on one P1 discretization, by the fused kernels.
+
+    Build it with :func:`kernels_for`, which returns None where the numpy
+    path must be used.
+
+    Parameters
+    ----------
+    material : Material
+        One of the classes of :func:`registry`.
+    space : Discretization
+        Of order 1.
+    """
+
+    def __init__(self, material: Material, space: Discretization):
+        if space.order != 1:
+            raise ValueError(f"the fused kernels are for P1 tets, got order {space.order}")
+        name, params = _REGISTRY[type(material)]
+        self._k = _kernels()
+        self.kind = getattr(self._k, name.upper())
+        self.prm = params(material)
+        entry = _cache.get(space)
+        self.geo = entry[0] if entry is not None else _P1Geometry(space)
+
+    def _x(self, x) -> np.ndarray:
+        """x as a read-only, C-contiguous float view (a copy only if it is not one already)."""
+        x = np.ascontiguousarray(x, dtype=float)
+        if x.shape != (self.geo.ndofs,):
+            raise ValueError(f"x must have shape ({self.geo.ndofs},), got {x.shape}")
+        if x.flags.writeable:
+            x = x.view()
+            x.setflags(write=False)
+        return x
+
+    def energy(self, x: np.ndarray) -> float:
+        """Elastic energy (J); +inf if any element is inadmissible."""
+        g = self.geo
+        e = self._k.energy_p1(self._x(x), g.X, g.nodes, g.Dm_inv, g.V, self.kind, self.prm)
+        return float(e)
+
+    def gradient(self, x: np.ndarray) -> np.ndarray:
+        """dE/dx (N), ``(ndofs,)``, a new array."""
+        g = self.geo
+        out = np.empty(g.ndofs)
+        self._k.gradient_p1(self._x(x), g.X, g.nodes, g.Dm_inv, g.V, self.kind, self.prm, out)
+        return out
+
+
+def kernels_for(material: Material, space: Discretization) -> FusedP1 | None:
+    """The fused kernels for a material on a discretization, or None for the numpy path.
+
+    None unless the space is P1, the material's exact class is registered
+    (see :func:`registry`) and :func:`available` is true.
+
+    Parameters
+    ----------
+    material : Material
+    space : Discretization
+
+    Returns
+    -------
+    FusedP1 or None
+    """
+    if space.order != 1 or type(material) not in _REGISTRY or not available():
+        return None
+    entry = _cache.get(space)
+    if entry is None:
+        entry = _cache[space] = (_P1Geometry(space), {})
+    fused = entry[1].get(material)
+    if fused is None:
+        fused = entry[1][material] = FusedP1(material, space)
+    return fused
