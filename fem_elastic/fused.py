@@ -25,7 +25,7 @@ of :mod:`fem_elastic.materials.svd` to keep in step with the first.
 The loops are serial (one thread): the scatter-add into the global vector
 needs no coloring or atomics then, results do not depend on a thread count,
 and the rest of a time step (numpy vector updates) is single-threaded too.
-On the 153,600-tet beam of ``scripts/bench_forces.py`` the fused gradient
+On the 153,600-tet beam of ``scripts/bench_step.py`` the fused gradient
 takes ~10 ms against ~70 ms on the numpy path.
 
 numba is optional (the ``fast`` extra) and imported on first use only:

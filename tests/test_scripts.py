@@ -37,3 +37,18 @@ def test_shipped_meshes_are_what_make_meshes_builds():
         # VTU stores float64 points as written: equal up to the ascii/binary round trip
         np.testing.assert_allclose(shipped.p, built.p, rtol=0, atol=1e-15)
         assert set(shipped.boundaries) == set(built.boundaries)
+
+
+def test_bench_step_quick_prints_its_figures():
+    r = subprocess.run(
+        [sys.executable, str(SCRIPTS / "bench_step.py"), "--quick", "--repeats", "1",
+         "--implicit-steps", "1"],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert r.returncode == 0, r.stderr
+    assert "numpy gradient" in r.stdout
+    assert "ImplicitEuler, dt = 1/60 s" in r.stdout and "shares of the step time" in r.stdout
+    if "fused gradient" in r.stdout:  # numba installed: the fused path agrees with numpy
+        diff = r.stdout.split("relative difference: gradient")[1]
+        g, e = float(diff.split(",")[0]), float(diff.split("energy")[1].split()[0])
+        assert g < 1e-12 and e < 1e-12

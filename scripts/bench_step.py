@@ -1,4 +1,4 @@
-"""Benchmark: elastic force and energy of P1 Neo-Hookean tets, numpy against the fused numba kernel.
+"""Benchmark: one time step, explicit and implicit, on a 153,600-tet Neo-Hookean beam.
 
 Times, in one run and on one mesh (default: a 1 x 0.1 x 0.1 m beam of 100 x 16 x 16 cells,
 153,600 P1 tets, 87,567 DOFs), in a bent state (an Euler-Bernoulli cantilever shape, as in
@@ -14,7 +14,14 @@ Times, in one run and on one mesh (default: a 1 x 0.1 x 0.1 m beam of 100 x 16 x
 
 against a reference measured on this machine by the issue author: NVIDIA Warp 1.9.1's CPU
 backend, 17.7 ms per step on the same Neo-Hookean tet forces, and 44.7 ms for a
-straightforward numpy kernel.
+straightforward numpy kernel;
+
+4. ``fe.ImplicitEuler`` steps of the cantilever released under gravity (dt = 1/60 s), with
+   the share of each step spent in assembly (residual and tangent, including the PSD
+   projection), in the projection alone (timed as the difference between a projected and an
+   exact linearization at the same state, times the number of projected ones), in the
+   linear solves (AMG-CG above 20k DOFs) and in the line search, and the Newton iterations
+   per step.
 
 numba and BLAS run single-threaded (the headline): ``NUMBA_NUM_THREADS`` is set to 1 before
 numba loads, unless ``--threads`` says otherwise, and BLAS is pinned to 1 thread with
@@ -23,9 +30,9 @@ cached object code) is timed separately. Prints medians over repeats.
 
 Usage::
 
-    python scripts/bench_forces.py               # full size, ~10-20 s
-    python scripts/bench_forces.py --quick       # 20 x 4 x 4 cells, seconds
-    python scripts/bench_forces.py --repeats 21 --cells 50 8 8
+    python scripts/bench_step.py               # full size, ~10-20 s
+    python scripts/bench_step.py --quick       # 20 x 4 x 4 cells, seconds
+    python scripts/bench_step.py --repeats 21 --cells 50 8 8
 """
 
 from __future__ import annotations
@@ -61,6 +68,8 @@ def main(argv=None):
     parser.add_argument("--quick", action="store_true", help="a 20 x 4 x 4 beam (seconds)")
     parser.add_argument("--repeats", type=int, default=11, help="repeats of each timing")
     parser.add_argument("--threads", type=int, default=1, help="NUMBA_NUM_THREADS (default 1)")
+    parser.add_argument("--implicit-steps", type=int, default=3,
+                        help="ImplicitEuler steps to time (0 skips the implicit part)")
     args = parser.parse_args(argv)
     cells = tuple(args.cells) if args.cells else ((20, 4, 4) if args.quick else (100, 16, 16))
     os.environ["NUMBA_NUM_THREADS"] = str(args.threads)  # read when numba is first imported
@@ -69,6 +78,58 @@ def main(argv=None):
 
     with threadpool_limits(limits=1):
         run(cells, max(1, args.repeats))
+        if args.implicit_steps > 0:
+            run_implicit(cells, args.implicit_steps)
+
+
+def run_implicit(cells, steps):
+    """ImplicitEuler on the cantilever released under gravity: per-step time and its shares."""
+    import fem_elastic as fe
+
+    mesh = fe.beam_mesh(1.0, 0.1, 0.1, cells)
+    model = fe.Model(mesh, density=1000.0, body=fe.ElasticBody(fe.NeoHookean(E=1.0e7, nu=0.45)),
+                     fixed="left", gravity=(0.0, 0.0, -9.81))
+    # count and time the projected and exact linearizations Newton asks for
+    calls = {True: 0, False: 0}
+    linearize = model.linearize
+
+    def counting(x, load_factor=1.0, project=True):
+        calls[bool(project)] += 1
+        return linearize(x, load_factor, project=project)
+
+    model.linearize = counting
+    dt = 1.0 / 60.0
+    integrator = fe.ImplicitEuler()
+    run = fe.simulate(model, integrator, dt, steps=steps)
+    st = run.step_stats
+    step_s = st["seconds_step"]
+    # the projection alone: a projected minus an exact linearization, at the last state
+    x = run.final_state.x
+    t_proj, t_exact = [], []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        linearize(x, project=True)
+        t_proj.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        linearize(x, project=False)
+        t_exact.append(time.perf_counter() - t0)
+    proj_each = max(statistics.median(t_proj) - statistics.median(t_exact), 0.0)
+    total = float(step_s.sum())
+    assembly = float(st["seconds_linearize"].sum())
+    solve = float(st["seconds_solve"].sum())
+    search = float(st["seconds_line_search"].sum())
+    projection = proj_each * calls[True]
+    print()
+    print(f"ImplicitEuler, dt = 1/60 s, {steps} steps of the cantilever released under gravity "
+          f"({model.ndofs:,} DOFs, linear solver {'AMG-CG' if model.ndofs > 20000 else 'sparse LU'}):")
+    print(f"  per step: median {statistics.median(step_s):.2f} s; Newton iterations per step "
+          f"{st['newton_iterations'].tolist()} (median {statistics.median(st['newton_iterations'])}); "
+          f"linear-solver iterations {st['linear_iterations'].tolist()}")
+    print(f"  linearizations: {calls[True]} projected, {calls[False]} exact; "
+          f"projection {proj_each * 1e3:.0f} ms each")
+    print(f"  shares of the step time: assembly (incl. projection) {assembly / total:5.1%}, "
+          f"of which projection {projection / total:5.1%}; linear solve {solve / total:5.1%}; "
+          f"line search {search / total:5.1%}; other {(total - assembly - solve - search) / total:5.1%}")
 
 
 def bent_state(X: np.ndarray) -> np.ndarray:
