@@ -109,3 +109,20 @@ def test_progress_bar_and_logging(sagging, capsys, caplog):
     assert any("completed 3 steps" in r.getMessage() for r in caplog.records)
     fe.simulate(sagging, fe.ImplicitEuler(), 0.01, steps=2)
     assert "2/2" not in capsys.readouterr().err  # no bar unless asked
+
+
+def test_explicit_schemes_never_build_a_hessian_and_scenes_build_only_what_they_declare(monkeypatch):
+    mesh = fe.beam_mesh(length=0.3, width=0.1, height=0.1, cells=(3, 1, 1))
+    plain = fe.Model(mesh, density=1000.0, body=fe.ElasticBody(fe.NeoHookean(E=1e5, nu=0.3)), fixed="left")
+    assert plain.loads == () and plain.contacts == () and plain.obstacles == ()
+    assert plain.damping is None and plain.damping_force(plain.X, plain.X) is None
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("an explicit integrator asked for a Hessian")
+
+    monkeypatch.setattr(fe.ElasticPotential, "hessian", forbidden)
+    monkeypatch.setattr(fe.ElasticPotential, "linearize", forbidden)
+    s0 = fe.State.rest(plain, velocity=lambda X: np.c_[0 * X[:, 0], 0 * X[:, 0], X[:, 0]])
+    for cls in (fe.ExplicitEuler, fe.SymplecticEuler, fe.Midpoint, fe.RK4):
+        fe.simulate(plain, cls(), 1e-4, steps=3, state=s0, check_stability=False)
+    assert "mass_matrix" not in vars(plain)  # the consistent mass was never assembled
