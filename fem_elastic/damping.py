@@ -1,15 +1,23 @@
 """Rayleigh damping: a dissipation proportional to mass and to stiffness.
 
 Damping is not an energy, so it is not a Potential: the integrators apply
-the damping force ``f_d = -C v`` with the constant Rayleigh matrix
+the damping force ``f_d = -C v`` with the Rayleigh matrix
 
-    C = alpha M + beta K_0,
+    C = alpha M + beta K(x),
 
-where ``M`` is the mass the integrator uses (lumped for explicit schemes,
-consistent for implicit ones unless told otherwise) and ``K_0`` the body's
-stiffness at the reference configuration (assembled once, on first use).
-Keeping ``C`` constant is the classical choice: the damping ratio of the
-linear mode of angular frequency omega is
+where ``M`` is the mass the integrator uses (the lumped mass by default,
+for every integrator; implicit ones accept ``mass="consistent"``) and
+``K(x)`` the body's linear-elastic rest stiffness rotated element by
+element to the current configuration (``sum_e R_e K_e R_e^T``, stiffness
+warping; :meth:`fe.Model.damping_stiffness`). The rotation matters: the
+plain rest stiffness ``K_0`` brakes a spinning body, because it only
+ignores infinitesimal rotations about the reference shape; the warped one
+ignores rigid motion at any orientation and stays positive semi-definite,
+so the damping only dissipates. Explicit schemes apply it matrix-free (one
+polar decomposition per element per force evaluation); implicit ones
+freeze it at the start of each step. For small motions about the
+reference ``K(x) = K_0`` and the damping ratio of the linear mode of
+angular frequency omega is
 
     zeta(omega) = alpha / (2 omega) + beta omega / 2,
 
@@ -19,6 +27,7 @@ so ``alpha`` (1/s) damps the slow modes and ``beta`` (s) the fast ones.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 from .errors import InvalidParameter
@@ -51,7 +60,7 @@ class Rayleigh:
     def __post_init__(self):
         for name in ("alpha", "beta"):
             val = getattr(self, name)
-            if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val) or val < 0:
+            if isinstance(val, bool) or not isinstance(val, numbers.Real) or not math.isfinite(val) or val < 0:
                 unit = "1/s" if name == "alpha" else "s"
                 raise InvalidParameter(
                     f"Rayleigh damping {name} must be a finite number >= 0 ({unit}), got {val!r}."

@@ -14,6 +14,7 @@ closed form (else a central difference).
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 
@@ -26,8 +27,9 @@ __all__ = ["Motion", "Twist", "Translate", "Prescribed"]
 def _check_time(value, name: str, allow_none: bool = False) -> float | None:
     if value is None and allow_none:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) or value < 0:
         raise InvalidParameter(f"{name} must be a finite time >= 0 (s), got {value!r}.")
+    # numbers.Real: numpy scalars (np.float32 too) are accepted like Python floats
     return float(value)
 
 
@@ -49,6 +51,14 @@ class Motion:
     def active(self, t: float) -> bool:
         """Whether the nodes are held at time ``t`` (s)."""
         return self.release is None or t < self.release
+
+    def moving(self, t: float) -> bool:
+        """Whether the held nodes may still be moving at ``t`` (s), i.e. doing work on the body.
+
+        A user motion may move at any time; :class:`Twist` and
+        :class:`Translate` stop at the end of their ``duration``.
+        """
+        return self.active(t) and t < getattr(self, "duration", math.inf)
 
     def displacement(self, X: np.ndarray, t: float) -> np.ndarray:  # pragma: no cover - abstract
         """Prescribed displacement ``(n, 3)`` (m) of nodes at reference positions ``X`` ``(n, 3)``."""
@@ -96,16 +106,16 @@ class Twist(Motion):
 
     def __init__(self, angle: float, duration: float, axis=(1.0, 0.0, 0.0), center=None, release=None):
         super().__init__(release)
-        if isinstance(angle, bool) or not isinstance(angle, (int, float)) or not math.isfinite(angle):
+        if isinstance(angle, bool) or not isinstance(angle, numbers.Real) or not math.isfinite(angle):
             raise InvalidParameter(f"Twist angle must be a finite number (rad), got {angle!r}.")
         self.angle = float(angle)
         self.duration = _check_time(duration, "Twist duration")
-        a = as_vector3(axis, "Twist axis", "a direction")
+        a = as_vector3(axis, "Twist axis", "a direction", "(1.0, 0.0, 0.0)")
         n = np.linalg.norm(a)
         if n == 0:
             raise InvalidParameter("Twist axis must be a non-zero vector, e.g. (1, 0, 0).")
         self.axis = a / n
-        self.center = None if center is None else as_vector3(center, "Twist center", "m")
+        self.center = None if center is None else as_vector3(center, "Twist center", "m", "(0.0, 0.05, 0.05)")
 
     def _geometry(self, X, t):
         c = X.mean(axis=0) if self.center is None else self.center
@@ -150,7 +160,7 @@ class Translate(Motion):
 
     def __init__(self, offset, duration: float, release=None):
         super().__init__(release)
-        self.offset = as_vector3(offset, "Translate offset", "m")
+        self.offset = as_vector3(offset, "Translate offset", "m", "(0.0, 0.0, -0.05)")
         self.duration = _check_time(duration, "Translate duration")
 
     def displacement(self, X, t):

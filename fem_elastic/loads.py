@@ -19,17 +19,17 @@ from .potential import LinearPotential
 __all__ = ["gravity_load", "traction_load", "as_vector3"]
 
 
-def as_vector3(value, name: str, unit: str) -> np.ndarray:
+def as_vector3(value, name: str, unit: str, example: str = "(0.0, 0.0, -9.81)") -> np.ndarray:
     """A finite 3-vector from user input, or a clear :class:`InvalidParameter`."""
     try:
         v = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise InvalidParameter(
-            f"{name} must be three numbers ({unit}), e.g. (0.0, 0.0, -9.81); got {value!r}."
+            f"{name} must be three numbers ({unit}), e.g. {example}; got {value!r}."
         ) from None
     if v.shape != (3,) or not np.all(np.isfinite(v)):
         raise InvalidParameter(
-            f"{name} must be three finite numbers ({unit}), e.g. (0.0, 0.0, -9.81); got {value!r}."
+            f"{name} must be three finite numbers ({unit}), e.g. {example}; got {value!r}."
         )
     return v
 

@@ -175,9 +175,9 @@ class Model:
 
     def kinetic_energy(self, v: np.ndarray, mass: str = "lumped") -> float:
         """1/2 v^T M v (J) with the lumped or consistent mass."""
-        if mass == "lumped":
-            return 0.5 * float(np.dot(self.lumped_mass * v, v))
-        return 0.5 * float(v @ (self.mass_matrix @ v))
+        if mass == "lumped":  # einsum, not a BLAS dot: no thread start-up for a reduction
+            return 0.5 * float(np.einsum("i,i,i->", self.lumped_mass, v, v))
+        return 0.5 * float(np.einsum("i,i->", v, self.mass_matrix @ v))
 
     def linear_momentum(self, v: np.ndarray) -> np.ndarray:
         """Total linear momentum (kg m/s), ``(3,)``; the same for lumped and consistent mass."""
@@ -192,8 +192,9 @@ class Model:
     def damping_force(self, x: np.ndarray, v: np.ndarray, mass: str = "lumped") -> np.ndarray | None:
         """The damping force (N), ``(ndofs,)``, or None when the model has no damping.
 
-        Rayleigh ``-(alpha M + beta K_0) v`` plus the body's own dashpots
-        (a mass-spring body's ``k_d``), if any.
+        Rayleigh ``-(alpha M + beta K(x)) v`` plus the body's own dashpots
+        (a mass-spring body's ``k_d``), if any. ``K(x)`` is the corotated rest
+        stiffness of a finite element body (see :meth:`damping_stiffness`).
         """
         f = None
         if self.damping is not None and (self.damping.alpha or self.damping.beta):
@@ -202,7 +203,9 @@ class Model:
                 mv = self.lumped_mass * v if mass == "lumped" else self.mass_matrix @ v
                 f -= self.damping.alpha * mv
             if self.damping.beta:
-                f -= self.damping.beta * (self.rest_stiffness @ v)
+                warped = self._warped_stiffness
+                Kv = warped.apply(x, v) if warped is not None else self.damping_stiffness(x) @ v
+                f -= self.damping.beta * Kv
         body_damping = getattr(self.body_potential, "damping_force", None)
         if body_damping is not None:
             fb = body_damping(x, v)
@@ -215,13 +218,40 @@ class Model:
         C = None
         if self.damping is not None and (self.damping.alpha or self.damping.beta):
             M = sp.diags(self.lumped_mass) if mass == "lumped" else self.mass_matrix
-            C = self.damping.alpha * M + self.damping.beta * self.rest_stiffness
+            C = self.damping.alpha * M
+            if self.damping.beta:
+                C = C + self.damping.beta * self.damping_stiffness(x)
         body_matrix = getattr(self.body_potential, "damping_matrix", None)
         if body_matrix is not None:
             Cb = body_matrix(x)
             if Cb is not None:
                 C = Cb if C is None else C + Cb
         return None if C is None else sp.csr_matrix(C)
+
+    def damping_stiffness(self, x: np.ndarray) -> sp.csr_matrix:
+        """The stiffness K(x) of stiffness-proportional damping (N/m), CSR.
+
+        A finite element body uses its linear-elastic rest stiffness rotated
+        element by element to the current configuration, ``sum_e R_e K_e
+        R_e^T`` (stiffness warping, :class:`fem_elastic.WarpedStiffness`): it is
+        positive semi-definite, so the damping only dissipates, and it
+        annihilates rigid motion at any orientation, so a spinning or
+        tumbling body is not braked (the plain rest stiffness K_0 would
+        brake it). Other bodies use their PSD-projected Hessian at x.
+        """
+        warped = self._warped_stiffness
+        if warped is not None:
+            return warped.hessian(x)
+        return self.body_potential.hessian(x, project=True)
+
+    @cached_property
+    def _warped_stiffness(self):
+        material = getattr(self.body_potential, "material", None)
+        if material is None or not hasattr(material, "mu"):
+            return None
+        from .stiffness_warping import WarpedStiffness
+
+        return WarpedStiffness(self.space, material)
 
     # contact and driven boundaries ---------------------------------------------------
     def respond_contacts(self, x: np.ndarray, v: np.ndarray):
@@ -254,14 +284,18 @@ class Model:
         return free
 
     def driving(self, t: float) -> bool:
-        """Whether a driven boundary is still held (so an energy source is acting) at ``t``."""
-        return any(motion.active(t) for motion, _, _ in self.driven)
+        """Whether a driven boundary may still be moving (an energy source) at ``t`` (s)."""
+        return any(motion.moving(t) for motion, _, _ in self.driven)
 
     def _check_damping(self, damping):
         if damping is None:
             return None
-        if not (hasattr(damping, "alpha") and hasattr(damping, "beta")):
-            raise InvalidParameter(f"damping must be fe.Rayleigh(alpha, beta) or None, got {damping!r}.")
+        from .damping import Rayleigh
+
+        if not isinstance(damping, Rayleigh):
+            raise InvalidParameter(
+                f"damping must be fe.Rayleigh(alpha, beta) (an instance) or None, got {damping!r}."
+            )
         return damping
 
     @staticmethod
@@ -270,7 +304,7 @@ class Model:
             return ()
         obstacles = tuple(ground) if isinstance(ground, (list, tuple)) else (ground,)
         for ob in obstacles:
-            if not (hasattr(ob, "build") and hasattr(ob, "respond")):
+            if isinstance(ob, type) or not (hasattr(ob, "build") and hasattr(ob, "respond")):
                 raise InvalidParameter(
                     f"ground must be an obstacle such as fe.Ground(z=0.0), fe.Sphere(...) or "
                     f"fe.Box(...), or a list of them; got {ob!r}."
@@ -278,16 +312,34 @@ class Model:
         return obstacles
 
     def _resolve_driven(self, driven):
+        from .driven import Motion
+
+        if driven is None:
+            return ()
+        if not isinstance(driven, dict):
+            raise InvalidParameter(
+                "driven must be a dict {boundary name: motion}, e.g. "
+                f"{{'right': fe.Twist(6.283, duration=1.0)}}; got {driven!r}."
+            )
         out = []
-        for name, motion in (driven or {}).items():
-            if not (hasattr(motion, "displacement") and hasattr(motion, "active")):
+        fixed_nodes = self.fixed_dofs[0::3] // 3
+        for name, motion in driven.items():
+            if not isinstance(name, str):
+                raise InvalidParameter(f"driven keys must be boundary names (str), got {name!r}.")
+            if not isinstance(motion, Motion):
                 raise InvalidParameter(
-                    f"driven[{name!r}] must be a motion such as fe.Twist(angle, duration) or "
-                    f"fe.Translate(offset, duration), got {motion!r}."
+                    f"driven[{name!r}] must be a motion instance such as fe.Twist(angle, duration), "
+                    f"fe.Translate(offset, duration) or fe.Prescribed(function); got {motion!r}."
                 )
             dofs = self._resolve_fixed(name, what="driven").reshape(-1, 3)
-            nodes_X = self.X[dofs]
-            out.append((motion, nodes_X, dofs))
+            # a node that is both fixed and driven stays fixed (e.g. the edge a fixed
+            # face shares with a driven one)
+            keep = ~np.isin(dofs[:, 0] // 3, fixed_nodes)
+            if not keep.all():
+                log.info("driven boundary %r: %d node(s) are also fixed and stay fixed", name,
+                         int((~keep).sum()))
+            dofs = dofs[keep]
+            out.append((motion, self.X[dofs], dofs))
         return tuple(out)
 
     def external_force(self, load_factor: float = 1.0) -> np.ndarray:
@@ -318,7 +370,18 @@ class Model:
 
     def gradient_roundoff(self) -> float:
         """Round-off floor of ||dPi/dx|| (N): the body's (``ElasticPotential.gradient_roundoff``)."""
+        return self._gradient_roundoff
+
+    @cached_property
+    def _gradient_roundoff(self) -> float:
         return self.body_potential.gradient_roundoff()
+
+    @cached_property
+    def rigid_body_modes(self) -> np.ndarray:
+        """``(ndofs, 6)`` rigid translations and rotations (read-only), the AMG near-null space."""
+        B = self.space.rigid_body_modes()
+        B.setflags(write=False)
+        return B
 
     def gradient(self, x: np.ndarray, load_factor: float = 1.0) -> np.ndarray:
         """dPi/dx (N), ``(ndofs,)``; the force on the DOFs is its negative."""

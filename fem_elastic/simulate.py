@@ -10,25 +10,28 @@ state and the trajectory recorded so far) when
 - an implicit step fails even after cutting the step.
 
 The energy bound: with ``E_0`` the total energy at the start (or when the
-last driven boundary is released) and ``S`` an energy scale of the scene
-(the largest of the initial kinetic, elastic and load energies and the work
-of gravity over the body's size), the run diverges when ``E > E_0 +
-energy_growth * S``. Damping and implicit schemes only lose energy; a
-symplectic scheme below its stability limit keeps it within a few percent;
-an unstable one multiplies it every step.
+last driven boundary stops moving or is released) and ``S`` an energy scale
+of the scene (the largest of the initial kinetic, potential and elastic
+energies, the work of the loads over the body's size, and the work of the
+loads carrying the body onto each obstacle), the run diverges when
+``E > E_0 + energy_growth * S``. Damping and implicit schemes only lose
+energy; a symplectic scheme below its stability limit keeps it within a few
+percent; an unstable one multiplies it every step. While a driven boundary
+moves it feeds energy in, and only non-finite values are checked.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import numbers
 import time
 import warnings
 
 import numpy as np
 
 from .errors import Diverged, InvalidParameter
-from .integrators.base import check_dt
+from .integrators.base import check_dt, check_state
 from .state import State
 from .trajectory import Trajectory
 
@@ -68,7 +71,9 @@ def simulate(
     dt : float
         Time step (s), > 0.
     t_end : float, optional
-        End time (s); ``round(t_end / dt)`` steps. Give exactly one of ``t_end`` and ``steps``.
+        End time (s), absolute: the run takes ``ceil((t_end - t0) / dt)``
+        steps from the initial state's time ``t0`` (ending on the first
+        multiple of dt at or after ``t_end``). Give exactly one of ``t_end`` and ``steps``.
     steps : int, optional
         Number of steps.
     state : State, optional
@@ -109,7 +114,12 @@ def simulate(
     ((6,), (6, 20, 3), True)
     """
     h = check_dt(dt)
-    n_steps = _n_steps(h, t_end, steps)
+    if state is None:
+        state = State.rest(model)
+    check_state(model, state)
+    n_steps = _n_steps(h, t_end, steps, state.t)
+    if callback is not None and not callable(callback):
+        raise InvalidParameter(f"callback must be a function (step, state), got {callback!r}.")
     if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) or record_every < 1:
         raise InvalidParameter(f"record_every must be an integer >= 1, got {record_every!r}.")
     if not (isinstance(energy_growth, (int, float)) and energy_growth > 0):
@@ -117,12 +127,6 @@ def simulate(
     if not hasattr(integrator, "step"):
         raise InvalidParameter(
             f"integrator must be e.g. fe.ImplicitEuler() or fe.SymplecticEuler(), got {integrator!r}."
-        )
-    state = State.rest(model) if state is None else state
-    if state.x.shape != (model.ndofs,):
-        raise InvalidParameter(
-            f"the initial state has {state.x.size} DOFs but the model has {model.ndofs}; "
-            "build it with fe.State.rest(model, ...)."
         )
     mass = "lumped" if getattr(integrator, "explicit", True) else getattr(integrator, "mass", "lumped")
     if check_stability and getattr(integrator, "explicit", False):
@@ -158,12 +162,13 @@ def simulate(
             last = k == n_steps - 1
             was_driving, driving = driving, model.driving(new.t)
             record = (k + 1) % record_every == 0 or last
-            if record or (k + 1) % check_every == 0:
+            released = was_driving and not driving
+            if record or released or (k + 1) % check_every == 0:
                 e = rec.energies(new)
                 if not math.isfinite(e[2]):
                     raise _diverged("the energy is not finite (an inverted element?)", k, state, rec,
                                     stats, k, t_start, integrator, h)
-                if was_driving and not driving:  # released: the energy from here on is the budget
+                if released:  # the drive stopped: the energy from here on is the budget
                     e_ref, scale = e[2], max(scale, abs(e[2]))
                 elif not driving and e[2] > e_ref + energy_growth * scale:
                     raise _diverged(
@@ -188,18 +193,31 @@ def simulate(
     return traj
 
 
-def _n_steps(h, t_end, steps):
+_MAX_STEPS = 10**8  # per-step statistics take 8 arrays of this length
+
+
+def _n_steps(h, t_end, steps, t0):
     if (t_end is None) == (steps is None):
         raise InvalidParameter("give exactly one of t_end (s) and steps, e.g. t_end=1.0.")
     if steps is not None:
         if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
             raise InvalidParameter(f"steps must be an integer >= 1, got {steps!r}.")
-        return int(steps)
-    if isinstance(t_end, bool) or not isinstance(t_end, (int, float)) or not math.isfinite(t_end) or t_end <= 0:
-        raise InvalidParameter(f"t_end must be a finite time > 0 (s), got {t_end!r}.")
-    n = int(round(t_end / h))
-    if n < 1:
-        raise InvalidParameter(f"t_end = {t_end} s is shorter than one step dt = {h} s.")
+        n = int(steps)
+    else:
+        if isinstance(t_end, bool) or not isinstance(t_end, numbers.Real) or not math.isfinite(t_end):
+            raise InvalidParameter(f"t_end must be a finite time (s), got {t_end!r}.")
+        if t_end <= t0:
+            raise InvalidParameter(
+                f"t_end = {t_end} s is not after the initial state's time {t0} s; t_end is the "
+                "absolute end time (use steps=N for a number of steps)."
+            )
+        # the first multiple of dt at or after t_end; 1e-9 absorbs round-off in the division
+        n = int(math.ceil((t_end - t0) / h - 1e-9))
+    if n > _MAX_STEPS:
+        raise InvalidParameter(
+            f"{n:.3g} steps asked (t_end / dt); at most {_MAX_STEPS:.0e} per call: raise dt or "
+            "split the run (simulate(..., state=run.final_state))."
+        )
     return n
 
 
@@ -226,9 +244,15 @@ def _energy_scale(model, state, rec):
     ke, pe, _ = rec.energies(state)
     el = model.body_potential.energy(state.x)
     scale = max(abs(ke), abs(pe), abs(el) if math.isfinite(el) else 0.0)
-    if model.loads:  # the work of the loads over the body's size
-        size = float(np.ptp(model.X.reshape(-1, 3), axis=0).max())
-        scale = max(scale, float(np.abs(model.external_force()).sum()) * size)
+    if model.loads:
+        load = float(np.linalg.norm(model.external_force().reshape(-1, 3).sum(axis=0)))
+        load = max(load, float(np.abs(model.external_force()).sum()) / 3.0)
+        nodes = state.x.reshape(-1, 3)
+        size = float(np.ptp(nodes, axis=0).max())
+        scale = max(scale, load * size)  # the work of the loads over the body's size
+        for obstacle in model.obstacles:  # ... and carrying the body onto each obstacle
+            reach = float(np.max(obstacle.signed_distance(nodes)))
+            scale = max(scale, load * (reach + size))
     return max(scale, 1e3 * model.energy_roundoff())
 
 
@@ -267,7 +291,7 @@ def _diverged(reason, k, state, rec, stats, n_done, t_start, integrator, h, deta
     traj = rec.trajectory(stats, n_done, time.perf_counter() - t_start, integrator, h, state)
     traj.message = f"diverged at step {k}: {reason}"
     err = Diverged(
-        f"the simulation diverged at step {k} (t = {state.t:.6g} s): {detail or reason}. The last "
+        f"the simulation diverged at step {k} (t = {state.t:.6g} s): {(detail or reason).rstrip('.')}. The last "
         "good state and the frames recorded so far are attached (err.last_good_state, "
         "err.trajectory). Try a smaller dt, an implicit integrator (fe.ImplicitEuler), or damping.",
         step=k, time=state.t, reason=reason, last_good_state=state,

@@ -7,6 +7,8 @@ it by the Model, never stored in it.
 
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,7 +19,10 @@ __all__ = ["State"]
 
 
 def _readonly(a) -> np.ndarray:
-    a = np.array(a, dtype=float)  # a private copy, so nobody else can change it
+    try:
+        a = np.array(a, dtype=float)  # a private copy, so nobody else can change it
+    except (TypeError, ValueError):
+        raise InvalidParameter(f"State x and v must be arrays of numbers, got {a!r}.") from None
     a.setflags(write=False)
     return a
 
@@ -52,7 +57,10 @@ class State:
     def __post_init__(self):
         object.__setattr__(self, "x", _readonly(self.x))
         object.__setattr__(self, "v", _readonly(self.v))
-        object.__setattr__(self, "t", float(self.t))
+        t = self.t
+        if isinstance(t, bool) or not isinstance(t, numbers.Real) or not math.isfinite(t):
+            raise InvalidParameter(f"State time t must be a finite number (s), got {t!r}.")
+        object.__setattr__(self, "t", float(t))
         if self.x.ndim != 1 or self.x.shape != self.v.shape:
             raise InvalidParameter(
                 f"State needs flat x and v of equal shape (ndofs,), got {self.x.shape} and {self.v.shape}."
@@ -100,7 +108,13 @@ def _node_field(model, value, name: str) -> np.ndarray:
         if arr.shape != (nn, 3):
             raise InvalidParameter(f"the {name} function must return shape ({nn}, 3), got {arr.shape}.")
         return arr.ravel()
-    arr = np.asarray(value, dtype=float)
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InvalidParameter(
+            f"{name} must be None, a 3-vector, an (n, 3) array or a function of the node "
+            f"positions; got {value!r}."
+        ) from None
     if arr.shape == (3,):
         return np.tile(arr, nn)
     if arr.shape == (nn, 3):

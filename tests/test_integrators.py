@@ -121,10 +121,10 @@ def test_energy_behaviour_on_a_vibrating_beam(linear_beam):
     ee = runs["ExplicitEuler"].total
     assert ee[-1] > 1.5 * e0 and np.all(np.diff(ee) > 0)  # grows at every step
     se = runs["SymplecticEuler"].total
-    # symplectic Euler's energy oscillates by O(omega h) without trend; at half the
-    # stability limit the swing is a few tens of percent of E0 in the top modes
-    assert np.abs(se - e0).max() < 0.5 * e0
-    assert abs(se[-20:].mean() - e0) < 0.2 * e0
+    # symplectic Euler's energy error oscillates, O(omega h) for the modes excited, without a
+    # trend; the released static shape is mostly the slow first mode: measured 0.4-0.7 %
+    assert np.abs(se - e0).max() < 0.02 * e0
+    assert abs(se[-20:].mean() - e0) < 0.02 * e0
     ie = runs["ImplicitEuler"].total
     # amplification 1/sqrt(1 + (omega h)^2) per step at omega h = 2 pi / 20: the first mode
     # keeps (1 + 0.099)^-60 = 0.4 % of its energy; monotone to Newton's tolerance
@@ -157,9 +157,10 @@ def test_free_body_conserves_momentum():
         np.testing.assert_allclose(run.linear_momentum, np.broadcast_to(P0, run.linear_momentum.shape),
                                    atol=1e-7 * np.abs(P0).max(), err_msg=cls.__name__)
         if cls is fe.SymplecticEuler:
+            # exact in exact arithmetic; 20 steps of round-off on sums over 32 nodes
             np.testing.assert_allclose(run.angular_momentum,
                                        np.broadcast_to(L0, run.angular_momentum.shape),
-                                       atol=1e-12 * np.abs(L0).max() * 1e3)
+                                       rtol=0, atol=1e-12 * np.abs(L0).max())
 
 
 def test_explicit_euler_above_the_critical_step_is_caught_as_diverged(linear_beam):

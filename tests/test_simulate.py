@@ -126,3 +126,88 @@ def test_explicit_schemes_never_build_a_hessian_and_scenes_build_only_what_they_
     for cls in (fe.ExplicitEuler, fe.SymplecticEuler, fe.Midpoint, fe.RK4):
         fe.simulate(plain, cls(), 1e-4, steps=3, state=s0, check_stability=False)
     assert "mass_matrix" not in vars(plain)  # the consistent mass was never assembled
+
+
+@pytest.mark.parametrize("integrator", [fe.ImplicitEuler(), fe.Newmark(), fe.Newmark(mass="consistent")],
+                         ids=["ImplicitEuler", "Newmark", "Newmark-consistent"])
+def test_implicit_steps_converge_at_tiny_dt_far_from_the_origin(integrator):
+    """The inertia term's round-off grows as |x| / dt^2: Newton's floor must include it."""
+    mesh = fe.beam_mesh(length=1.0, width=0.1, height=0.1, cells=(6, 1, 1)).translated((1000.0, 0, 0))
+    body = fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3))
+    model = fe.Model(mesh, density=1000.0, body=body, fixed="left")
+    s0 = fe.State.rest(model, velocity=lambda X: np.c_[0 * X[:, 0], 0 * X[:, 0], X[:, 0] - 1000.0])
+    run = fe.simulate(model, integrator, 1e-5, steps=3, state=s0)
+    assert run.dt_cuts == 0 and (run.step_stats["newton_iterations"] <= 2).all()
+
+
+def test_release_between_energy_checks_resets_the_energy_budget():
+    mesh = fe.beam_mesh(length=1.0, width=0.1, height=0.1, cells=(6, 1, 1))
+    model = fe.Model(mesh, density=1000.0, body=fe.ElasticBody(fe.NeoHookean(E=1e5, nu=0.3)),
+                     fixed="left", driven={"right": fe.Twist(np.pi / 2, duration=0.2, release=0.305)})
+    run = fe.simulate(model, fe.ImplicitEuler(), 0.01, t_end=0.6, record_every=10)
+    assert run.times[-1] == pytest.approx(0.6)
+
+
+def test_a_long_fall_onto_the_ground_is_not_mistaken_for_a_blow_up():
+    cube = fe.beam_mesh(length=0.1, width=0.1, height=0.1, cells=(2, 2, 2)).translated((0, 0, 3.0))
+    model = fe.Model(cube, density=1000.0, body=fe.ElasticBody(fe.NeoHookean(E=1e5, nu=0.3)),
+                     gravity=(0, 0, -9.81), ground=fe.Ground(0.0))
+    dt = 0.5 * fe.critical_time_step(model, fe.SymplecticEuler())
+    run = fe.simulate(model, fe.SymplecticEuler(), dt, t_end=1.2, record_every=100)
+    assert run.kinetic.max() > 25.0  # 1 kg falling 3 m: 29 J of kinetic energy at impact
+    # symplectic Euler's energy error at the stiff penalty impact stays a few % of that
+    assert np.abs(run.total - run.total[0]).max() < 0.1 * 29.4
+
+
+def test_t_end_is_an_absolute_time():
+    mesh = fe.beam_mesh(cells=(2, 1, 1))
+    model = fe.Model(mesh, density=1000.0, body=fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3)),
+                     fixed="left")
+    s = fe.State(model.X, np.zeros(model.ndofs), t=1.0)
+    run = fe.simulate(model, fe.ImplicitEuler(), 0.1, t_end=1.5, state=s)
+    assert run.steps == 5 and run.times[-1] == pytest.approx(1.5)
+    run = fe.simulate(model, fe.ImplicitEuler(), 0.1, t_end=0.25)  # not a whole number of steps
+    assert run.times[-1] == pytest.approx(0.3)  # the first multiple of dt at or after t_end
+    with pytest.raises(fe.InvalidParameter, match="not after"):
+        fe.simulate(model, fe.ImplicitEuler(), 0.1, t_end=0.5, state=s)
+    with pytest.raises(fe.InvalidParameter, match="steps asked"):
+        fe.simulate(model, fe.ImplicitEuler(), 1e-3, t_end=1e300)
+
+
+def _plain():
+    return fe.Model(fe.beam_mesh(cells=(2, 1, 1)), density=1000.0,
+                    body=fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3)), fixed="left")
+
+
+@pytest.mark.parametrize(
+    "call, match",
+    [
+        (lambda m: fe.simulate(m, fe.RK4(), 1e-3, steps=1, state=m.X), "fe.State"),
+        (lambda m: fe.ImplicitEuler().step(m, None, 1e-3), "fe.State"),
+        (lambda m: fe.RK4().step(m, fe.State(np.zeros(6), np.zeros(6)), 1e-3), "DOFs"),
+        (lambda m: fe.simulate(m, fe.RK4(), 1e-3, steps=1, callback=3), "callback"),
+        (lambda m: fe.ImplicitEuler(linear_solver="direct"), "linear_solver"),
+        (lambda m: fe.State(m.X, m.X, t=np.nan), "finite"),
+        (lambda m: fe.State(m.X, m.X, t="a"), "finite"),
+        (lambda m: fe.State.rest(m, velocity="up"), "velocity"),
+        (lambda m: fe.Model(m.mesh, 1.0, m.body, driven=["right"]), "dict"),
+        (lambda m: fe.Model(m.mesh, 1.0, m.body, driven={3: fe.Translate((0, 0, 1), 1.0)}), "names"),
+        (lambda m: fe.Model(m.mesh, 1.0, m.body, driven={"right": fe.Twist}), "instance"),
+        (lambda m: fe.Model(m.mesh, 1.0, m.body, damping=fe.Rayleigh), "instance"),
+        (lambda m: fe.Model(m.mesh, 1.0, m.body, damping=(0.1, 0.2)), "Rayleigh"),
+        (lambda m: fe.Model(m.mesh, 1.0, m.body, ground=fe.Ground), "obstacle"),
+    ],
+)
+def test_bad_input_gets_a_typed_error(call, match):
+    with pytest.raises(fe.InvalidParameter, match=match):
+        call(_plain())
+
+
+def test_a_node_both_fixed_and_driven_stays_fixed():
+    mesh = fe.beam_mesh(cells=(2, 1, 1))
+    model = fe.Model(mesh, density=1000.0, body=fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3)),
+                     fixed="bottom", driven={"right": fe.Translate((0, 0, 0.1), duration=1.0)})
+    dofs, x, _ = model.constraints(1.0)
+    pos = dict(zip(dofs.tolist(), x.tolist()))
+    corner = np.flatnonzero((mesh.p[0] == 1.0) & (mesh.p[2] == 0.0))  # on bottom and right
+    assert all(pos[3 * i + 2] == 0.0 for i in corner)

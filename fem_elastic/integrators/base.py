@@ -16,6 +16,7 @@ frequency.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -23,12 +24,25 @@ import numpy as np
 from ..errors import InvalidParameter
 from ..state import State
 
-__all__ = ["Integrator", "StepStats", "check_dt"]
+__all__ = ["Integrator", "StepStats", "check_dt", "check_state"]
+
+
+def check_state(model, state) -> None:
+    """:class:`InvalidParameter` unless ``state`` is a State of ``model``'s size."""
+    if not isinstance(state, State):
+        raise InvalidParameter(
+            f"state must be a fe.State (e.g. fe.State.rest(model)), got {type(state).__name__}."
+        )
+    if state.x.shape != (model.ndofs,):
+        raise InvalidParameter(
+            f"the state has {state.x.size} DOFs but the model has {model.ndofs}; "
+            "build it with fe.State.rest(model, ...)."
+        )
 
 
 def check_dt(dt) -> float:
     """``dt`` as a float, or :class:`InvalidParameter` unless it is finite and > 0 (s)."""
-    if isinstance(dt, bool) or not isinstance(dt, (int, float, np.number)) or not math.isfinite(dt) or dt <= 0:
+    if isinstance(dt, bool) or not isinstance(dt, numbers.Real) or not math.isfinite(dt) or dt <= 0:
         raise InvalidParameter(
             f"the time step dt must be a finite number > 0 (s), got {dt!r}; e.g. dt=1e-3."
         )

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..state import State
-from .base import Integrator, StepStats, check_dt
+from .base import Integrator, StepStats, check_dt, check_state
 
 __all__ = ["ExplicitEuler", "SymplecticEuler", "Midpoint", "RK4"]
 
@@ -68,6 +68,7 @@ class ExplicitEuler(_Explicit):
 
     def step(self, model, state: State, dt: float) -> State:
         h = check_dt(dt)
+        check_state(model, state)
         stats = self.last_stats = StepStats()
         x, v, free = state.x, state.v, model.free_at(state.t)
         a = self._acceleration(model, x, v, free, stats)
@@ -96,6 +97,7 @@ class SymplecticEuler(_Explicit):
 
     def step(self, model, state: State, dt: float) -> State:
         h = check_dt(dt)
+        check_state(model, state)
         stats = self.last_stats = StepStats()
         free = model.free_at(state.t)
         a = self._acceleration(model, state.x, state.v, free, stats)
@@ -125,6 +127,7 @@ class Midpoint(_Explicit):
 
     def step(self, model, state: State, dt: float) -> State:
         h = check_dt(dt)
+        check_state(model, state)
         stats = self.last_stats = StepStats()
         t = state.t
         x, v, free = state.x, state.v, model.free_at(t)
@@ -153,6 +156,7 @@ class RK4(_Explicit):
 
     def step(self, model, state: State, dt: float) -> State:
         h = check_dt(dt)
+        check_state(model, state)
         stats = self.last_stats = StepStats()
         t = state.t
         x1, v1, free = state.x, state.v, model.free_at(t)

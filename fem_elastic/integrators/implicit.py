@@ -28,7 +28,7 @@ import numpy as np
 from ..errors import Diverged, InvalidParameter
 from ..newton import _direction, newton_minimize
 from ..state import State
-from .base import Integrator, StepStats, check_dt
+from .base import Integrator, StepStats, check_dt, check_state
 from .incremental import IncrementalPotential
 
 __all__ = ["ImplicitEuler", "LinearizedImplicitEuler"]
@@ -50,6 +50,11 @@ class _Implicit(Integrator):
     def __init__(self, mass="lumped", max_dt_cuts=4, linear_solver=None):
         super().__init__()
         self.mass = _check_mass(mass)
+        if linear_solver is not None and not callable(getattr(linear_solver, "solve", None)):
+            raise InvalidParameter(
+                "linear_solver must be a solver object such as fe.DirectSolver(), fe.AMGSolver() "
+                f"or fe.AutoSolver(), got {linear_solver!r}."
+            )
         if isinstance(max_dt_cuts, bool) or not isinstance(max_dt_cuts, int) or max_dt_cuts < 0:
             raise InvalidParameter(f"max_dt_cuts must be an integer >= 0, got {max_dt_cuts!r}.")
         self.max_dt_cuts = max_dt_cuts
@@ -57,6 +62,7 @@ class _Implicit(Integrator):
 
     def step(self, model, state: State, dt: float) -> State:
         h = check_dt(dt)
+        check_state(model, state)
         stats = self.last_stats = StepStats()
         out, why = self._cut_step(model, state, h, 0, stats)
         if out is None:
@@ -94,9 +100,8 @@ class _Implicit(Integrator):
     def _solver_settings(self, model):
         return dict(
             linear_solver=self.linear_solver,
-            near_null=model.space.rigid_body_modes(),
+            near_null=model.rigid_body_modes,
             pattern=model.space.pattern,
-            g_floor=model.gradient_roundoff(),
         )
 
 
@@ -107,9 +112,10 @@ class ImplicitEuler(_Implicit):
     ----------
     rtol : float
         Newton stops when the out-of-balance force of G on the free DOFs is
-        below ``rtol`` times the step's force scale (the inertial force
-        ``||M (x0 - y)|| / h^2`` of the first guess, or the external load),
-        or at the round-off floor.
+        below ``rtol`` times the step's force scale (the larger of the
+        momentum flux ``||M v_n|| / h``, the external load and the elastic
+        force at the first guess), or at the round-off floor of G (the
+        body's, plus the inertia term's ``eps ||m |x| || / h^2``).
     max_iter : int
         Most Newton iterations per (sub-)step.
     mass : {"lumped", "consistent"}
@@ -162,14 +168,15 @@ class ImplicitEuler(_Implicit):
             x0[dofs] = xc
             if not math.isfinite(G.energy(x0)):
                 return None, "the prescribed boundary motion inverts an element in one step"
-        scale = G.scale(x0)
+        scale = G.scale(state, free)
+        counted = _Counted(G)
         res = newton_minimize(
-            G.energy, G.linearize, x0, free, rtol=self.rtol, g_scale=scale if scale > 0 else None,
-            max_iter=self.max_iter, energy_roundoff=model.energy_roundoff(), project=self.project,
-            gradient=G.gradient, **self._solver_settings(model),
+            G.energy, counted.linearize, x0, free, rtol=self.rtol, g_scale=scale if scale > 0 else None,
+            max_iter=self.max_iter, energy_roundoff=G.energy_roundoff(x0), project=self.project,
+            gradient=counted.gradient, g_floor=G.gradient_roundoff(x0), **self._solver_settings(model),
         )
         stats.newton_iterations += res.iterations
-        stats.gradient_evaluations += res.iterations + 1
+        stats.gradient_evaluations += counted.calls + 1  # + the elastic force in G.scale
         stats.line_search_cuts += res.line_search_cuts
         stats.linear_iterations += res.linear_iterations
         for k, v in res.seconds.items():
@@ -276,6 +283,21 @@ class LinearizedImplicitEuler(_Implicit):
 
     def step_matrix(self, h, omega, zeta=0.0):
         return np.linalg.inv(np.eye(2) - h * self._oscillator(omega, zeta))
+
+
+class _Counted:
+    """The objective's gradient and linearization, counting the residual evaluations."""
+
+    def __init__(self, G):
+        self.G, self.calls = G, 0
+
+    def gradient(self, x):
+        self.calls += 1
+        return self.G.gradient(x)
+
+    def linearize(self, x, project=True):
+        self.calls += 1
+        return self.G.linearize(x, project)
 
 
 class _Seconds:

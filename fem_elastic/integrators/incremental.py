@@ -23,6 +23,8 @@ import scipy.sparse as sp
 
 __all__ = ["IncrementalPotential"]
 
+_EPS = np.finfo(float).eps
+
 
 class IncrementalPotential:
     """G(x) for one implicit step; see the module notes.
@@ -59,7 +61,7 @@ class IncrementalPotential:
 
     def inertia_energy(self, x) -> float:
         d = x - self.y
-        return 0.5 * float(np.dot(d, self._M(d))) / self.k2
+        return 0.5 * float(np.einsum("i,i->", d, self._M(d))) / self.k2
 
     def energy(self, x) -> float:
         e = self.model.energy(x)
@@ -104,14 +106,36 @@ class IncrementalPotential:
                 return H
         return H + M / self.k2
 
-    def scale(self, x0) -> float:
-        """Force scale (N) for Newton's relative tolerance: inertia, loads and the start's residual."""
-        free = self.model.free
+    def scale(self, state, free) -> float:
+        """Force scale (N) for Newton's relative tolerance.
+
+        The larger of the momentum flux ``||M v_n|| / h`` (the inertial force
+        of the step), the external load, and the elastic force at the start
+        of the step, on the free DOFs.
+        """
+        m = self.model
         parts = [
-            np.linalg.norm(self._M(x0 - self.y)[free]) / self.k2,
-            np.linalg.norm(self.model.external_force()[free]),
+            np.linalg.norm(self._M(state.v)[free]) / np.sqrt(self.k2),
+            np.linalg.norm(m.external_force()[free]),
+            np.linalg.norm(m.body_potential.gradient(state.x)[free]),
         ]
         return float(max(parts))
+
+    def gradient_roundoff(self, x) -> float:
+        """Round-off floor of ||dG/dx|| (N): the model's plus the inertia term's.
+
+        The inertia force ``M (x - y) / k^2`` is a difference of positions of
+        size |x|, each known to eps |x|: ``eps ||m |x| || / k^2``.
+        """
+        m = self.model
+        inertia = _EPS * np.linalg.norm(m.lumped_mass * np.abs(x)) / self.k2
+        return m.gradient_roundoff() + float(inertia)
+
+    def energy_roundoff(self, x) -> float:
+        """Absolute round-off of G (J) beyond eps |G|: the model's plus the inertia term's."""
+        d = np.abs(x - self.y)
+        inertia = _EPS * float(np.einsum("i,i,i->", self.model.lumped_mass, np.abs(x), d)) / self.k2
+        return self.model.energy_roundoff() + inertia
 
 
 _POSITIONS = {}
