@@ -70,9 +70,47 @@ def _relative_residual(A, x, b) -> float:
     return float(np.linalg.norm(b - A @ x) / nb) if nb > 0 else 0.0
 
 
+class _FactorCache:
+    """The last factorization and the matrix it is of (one entry).
+
+    A linear body under an implicit integrator at a fixed dt gives the same
+    matrix every step: comparing the CSR arrays (O(nnz)) is far cheaper
+    than factorizing again. The comparison is exact, so a reused factor is
+    always the factor of the matrix given.
+    """
+
+    def __init__(self):
+        self.key = None
+        self.lu = None
+
+    @staticmethod
+    def _arrays(A):
+        return (A.shape, A.indptr, A.indices, A.data)
+
+    def get(self, A):
+        if self.key is None or self.key[0] != A.shape:
+            return None
+        _, indptr, indices, data = self.key
+        if (np.array_equal(indptr, A.indptr) and np.array_equal(indices, A.indices)
+                and np.array_equal(data, A.data)):
+            return self.lu
+        return None
+
+    def put(self, A, lu):
+        self.key = (A.shape, A.indptr.copy(), A.indices.copy(), A.data.copy())
+        self.lu = lu
+
+
+_FACTORS = _FactorCache()
+_CACHE_MAX_DOFS = 50_000  # larger factors hold too much memory to keep around
+
+
 @dataclass(frozen=True)
 class DirectSolver:
     """Sparse LU (SuperLU) with a symmetric fill-reducing ordering.
+
+    The last factorization is kept: solving again with an identical matrix
+    (a linear body stepped implicitly at a fixed dt) only back-substitutes.
 
     Examples
     --------
@@ -84,18 +122,23 @@ class DirectSolver:
 
     def solve(self, A, b, near_null=None) -> LinearSolve:
         t0 = time.perf_counter()
-        try:
-            lu = spla.splu(
-                sp.csc_matrix(A),
-                permc_spec="MMD_AT_PLUS_A",
-                diag_pivot_thresh=0.0,
-                options=dict(SymmetricMode=True),
-            )
-        except RuntimeError as exc:  # SuperLU: "Factor is exactly singular"
-            raise SingularMatrix(
-                f"the stiffness matrix is singular ({exc}); some motion costs no energy: "
-                "check that the body is fixed (fixed=...) and that no element is degenerate."
-            ) from None
+        A = sp.csr_matrix(A)
+        lu = _FACTORS.get(A)
+        if lu is None:
+            try:
+                lu = spla.splu(
+                    sp.csc_matrix(A),
+                    permc_spec="MMD_AT_PLUS_A",
+                    diag_pivot_thresh=0.0,
+                    options=dict(SymmetricMode=True),
+                )
+            except RuntimeError as exc:  # SuperLU: "Factor is exactly singular"
+                raise SingularMatrix(
+                    f"the stiffness matrix is singular ({exc}); some motion costs no energy: "
+                    "check that the body is fixed (fixed=...) and that no element is degenerate."
+                ) from None
+            if A.shape[0] <= _CACHE_MAX_DOFS:
+                _FACTORS.put(A, lu)
         x = lu.solve(b)
         if not np.all(np.isfinite(x)):
             raise SingularMatrix("the direct solve produced non-finite values: the matrix is singular.")

@@ -63,3 +63,24 @@ def test_strict_auto_solver_reraises(system):
     strict = fe.AutoSolver(max_direct_dofs=10, amg=fe.AMGSolver(rtol=1e-10, maxiter=2)).strict()
     with pytest.raises(fe.LinearSolverFailed):
         strict.solve(A, b, B)
+
+
+def test_direct_solver_reuses_the_factor_of_an_identical_matrix_only():
+    from fem_elastic import linear_solvers
+
+    rng = np.random.default_rng(7)
+    n = 40
+    R = sp.random(n, n, density=0.2, random_state=1)
+    A = (R @ R.T + 10 * sp.identity(n)).tocsr()
+    b = rng.standard_normal(n)
+    x1 = fe.DirectSolver().solve(A, b).x
+    lu = linear_solvers._FACTORS.lu
+    x2 = fe.DirectSolver().solve(A.copy(), 2 * b).x  # equal arrays, another object: reused
+    assert linear_solvers._FACTORS.lu is lu
+    np.testing.assert_allclose(x2, 2 * x1, rtol=1e-12)
+    B = A.copy()
+    B.data[0] *= 1.0 + 1e-15 if B.data[0] != 0 else 1.0  # any change, however small: refactor
+    B.data[1] += 1.0
+    y = fe.DirectSolver().solve(B, b).x
+    assert linear_solvers._FACTORS.lu is not lu
+    np.testing.assert_allclose(B @ y, b, rtol=0, atol=1e-10 * np.abs(b).max())
