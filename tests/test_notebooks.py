@@ -27,7 +27,7 @@ EXPECTED = {
     "springs_vs_fem.ipynb": (
         ["A spring network is not the material", "Refinement", "Orientation", "Large deflection",
          "Dynamics", "Run time"],
-        6,
+        7,
     ),
     "integrators.ipynb": (
         ["Stability, predicted against observed", "With Rayleigh damping", "Energy", "Accuracy", "Cost"],
