@@ -327,3 +327,268 @@ def P_points(kind, F, prm, out):
                      F[6, n], F[7, n], F[8, n]), prm)
         for k in range(9):
             out[k, n] = p[k]
+
+
+# stiffness warping ----------------------------------------------------------------------
+# The polar rotation of F. Unlike the material kernels above it does not repeat the numpy
+# path's algorithm (materials.svd: Jacobi on F^T F, then Gram-Schmidt): it computes the
+# same rotation by iterations that converge to round-off, so the two agree to a few ulps
+# times the conditioning of R (1 / (s_2 + s_3), s the signed singular values).
+
+#: ``|F^T F - I|_F^2`` below which the inverse-free cubic iteration is used. Its
+#: eigenvalues s^2 then lie in (0.5, 1.5), where the iteration converges (its other fixed
+#: point, s^2 = 7/3, is far) and its first step already brings every s within 5 % of 1.
+_CUBIC_DEFECT2 = 0.25
+#: The cubic iteration stops after a step (Frobenius) below sqrt of this, 3.2e-6: its
+#: error is then ~2.5 step^3 < 1e-16.
+_CUBIC_TOL2 = 1e-11
+#: Newton's iteration stops after a step below this: it converges quadratically (error
+#: ~ step^2 / 2).
+_NEWTON_TOL = 1e-8
+#: Higham's scaling is applied while Newton's steps are larger than this (far from R).
+_NEWTON_SCALE_ABOVE = 1e-2
+#: More iterations than either needs for any F they are used on (scaled Newton: < 15
+#: up to condition numbers of 1e16); past them the SVD decides.
+_POLAR_MAX_ITER = 40
+
+# FMA contraction shortens the dependency chain of the cubic step, which is latency-bound
+# (measured: -15 % of warped_apply_p1); nothing compares it bit for bit with numpy.
+_jit_fma = numba.njit(cache=True, error_model="numpy", nogil=True, fastmath={"contract"})
+
+
+@_jit_fma
+def _gram(X):
+    """The upper triangle (a00, a01, a02, a11, a12, a22) of X^T X (contracted to FMA)."""
+    x00, x01, x02, x10, x11, x12, x20, x21, x22 = X
+    return (
+        x00 * x00 + x10 * x10 + x20 * x20,
+        x00 * x01 + x10 * x11 + x20 * x21,
+        x00 * x02 + x10 * x12 + x20 * x22,
+        x01 * x01 + x11 * x11 + x21 * x21,
+        x01 * x02 + x11 * x12 + x21 * x22,
+        x02 * x02 + x12 * x12 + x22 * x22,
+    )
+
+
+@_jit_fma
+def _cubic_step(X, A):
+    """``X (15 I - 10 A + 3 A^2) / 8`` with ``A = X^T X``: the inverse-free Pade iteration
+    (Kenney and Laub 1991; Higham, *Functions of Matrices*, 2008, sec. 8.5) for the polar
+    factor. A singular value s goes to ``s (15 - 10 s^2 + 3 s^4) / 8 = 1 + 2.5 (s - 1)^3
+    + ...``: cubic convergence without a division.
+    """
+    a00, a01, a02, a11, a12, a22 = A
+    b00 = a00 * a00 + a01 * a01 + a02 * a02  # B = A^2 (symmetric)
+    b01 = a00 * a01 + a01 * a11 + a02 * a12
+    b02 = a00 * a02 + a01 * a12 + a02 * a22
+    b11 = a01 * a01 + a11 * a11 + a12 * a12
+    b12 = a01 * a02 + a11 * a12 + a12 * a22
+    b22 = a02 * a02 + a12 * a12 + a22 * a22
+    m00 = 1.875 - 1.25 * a00 + 0.375 * b00
+    m11 = 1.875 - 1.25 * a11 + 0.375 * b11
+    m22 = 1.875 - 1.25 * a22 + 0.375 * b22
+    m01 = 0.375 * b01 - 1.25 * a01
+    m02 = 0.375 * b02 - 1.25 * a02
+    m12 = 0.375 * b12 - 1.25 * a12
+    x00, x01, x02, x10, x11, x12, x20, x21, x22 = X
+    return (
+        x00 * m00 + x01 * m01 + x02 * m02, x00 * m01 + x01 * m11 + x02 * m12,
+        x00 * m02 + x01 * m12 + x02 * m22,
+        x10 * m00 + x11 * m01 + x12 * m02, x10 * m01 + x11 * m11 + x12 * m12,
+        x10 * m02 + x11 * m12 + x12 * m22,
+        x20 * m00 + x21 * m01 + x22 * m02, x20 * m01 + x21 * m11 + x22 * m12,
+        x20 * m02 + x21 * m12 + x22 * m22,
+    )
+
+
+@_jit
+def _distance2(X, Y):
+    """|X - Y|_F^2, summed as a tree (a short dependency chain)."""
+    d0, d1, d2 = Y[0] - X[0], Y[1] - X[1], Y[2] - X[2]
+    d3, d4, d5 = Y[3] - X[3], Y[4] - X[4], Y[5] - X[5]
+    d6, d7, d8 = Y[6] - X[6], Y[7] - X[7], Y[8] - X[8]
+    return (((d0 * d0 + d1 * d1) + (d2 * d2 + d3 * d3))
+            + ((d4 * d4 + d5 * d5) + (d6 * d6 + d7 * d7)) + d8 * d8)
+
+
+@_jit
+def _polar_newton(F):
+    """(R, converged): the polar factor of F by scaled Newton, ``X <- (g X + X^-T / g) / 2``.
+
+    For ``det F > 0`` (the iteration keeps det X > 0 and converges to the
+    proper polar rotation, the ``U V^T`` of the signed SVD). g is Higham's
+    Frobenius scaling ``(|X^-1|_F / |X|_F)^(1/2)`` while the steps are
+    large, then 1 (plain Newton, quadratic). ``converged`` is False if the
+    iteration met a non-positive or non-finite determinant or did not
+    converge; the caller then takes the SVD.
+    """
+    X = F
+    scale = True
+    for _ in range(_POLAR_MAX_ITER):
+        K = _cofactor(X)  # det(X) X^-T
+        J = X[0] * K[0] + X[1] * K[1] + X[2] * K[2]
+        if not (J > 0.0 and J < np.inf):
+            return X, False
+        if scale:
+            g = math.sqrt(math.sqrt(_frobenius2(K) / _frobenius2(X)) / J)
+            a, b = 0.5 * g, 0.5 / (g * J)
+        else:
+            a, b = 0.5, 0.5 / J
+        Y = (
+            a * X[0] + b * K[0], a * X[1] + b * K[1], a * X[2] + b * K[2],
+            a * X[3] + b * K[3], a * X[4] + b * K[4], a * X[5] + b * K[5],
+            a * X[6] + b * K[6], a * X[7] + b * K[7], a * X[8] + b * K[8],
+        )
+        step2 = _distance2(X, Y)
+        X = Y
+        if step2 < _NEWTON_TOL * _NEWTON_TOL:
+            return X, True
+        if not step2 < np.inf:
+            return X, False
+        scale = step2 > _NEWTON_SCALE_ABOVE * _NEWTON_SCALE_ABOVE
+    return X, False
+
+
+@_jit
+def _polar_svd(F):
+    """The rotation ``U V^T`` of the signed SVD of F (materials.svd), through LAPACK.
+
+    LAPACK gives ``F = U diag(s) V^T``; the signed SVD flips the last column
+    of U where ``det U < 0`` and that of V where ``det V < 0``, so its
+    rotation is ``U diag(1, 1, det U det V) V^T``. NaN if F is not finite.
+    """
+    for k in range(9):
+        if not math.isfinite(F[k]):
+            n = np.nan
+            return (n, n, n, n, n, n, n, n, n)
+    A = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            A[i, j] = F[3 * i + j]
+    U, _, Vt = np.linalg.svd(A)
+    c = 1.0 if np.linalg.det(U) * np.linalg.det(Vt) > 0.0 else -1.0
+    R = np.empty(9)
+    for i in range(3):
+        for j in range(3):
+            R[3 * i + j] = U[i, 0] * Vt[0, j] + U[i, 1] * Vt[1, j] + c * U[i, 2] * Vt[2, j]
+    return (R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8])
+
+
+@_jit
+def polar_rotation(F):
+    """The proper rotation R of ``F = R S``, as ``materials.svd.polar_rotation`` (signed SVD).
+
+    ``det F > 0`` and F within ``|F^T F - I|_F < 0.5`` of a rotation (every
+    element of a moderately strained body): the cubic iteration, two steps
+    from F for strains up to ~1e-2. Other ``det F > 0``: scaled Newton.
+    Inverted or degenerate F (``det F <= 0``), or an iteration that fails:
+    LAPACK's SVD with the signed SVD's convention (``det R = +1``).
+    """
+    A = _gram(F)
+    a00, a01, a02, a11, a12, a22 = A
+    defect2 = (((a00 - 1.0) * (a00 - 1.0) + (a11 - 1.0) * (a11 - 1.0))
+               + ((a22 - 1.0) * (a22 - 1.0) + 2.0 * ((a01 * a01 + a02 * a02) + a12 * a12)))
+    J = _det(F)
+    if J > 0.0 and defect2 < _CUBIC_DEFECT2:
+        X1 = _cubic_step(F, A)
+        X = _cubic_step(X1, _gram(X1))
+        if _distance2(X1, X) < _CUBIC_TOL2:
+            return X
+        for _ in range(_POLAR_MAX_ITER):
+            Y = _cubic_step(X, _gram(X))
+            step2 = _distance2(X, Y)
+            X = Y
+            if step2 < _CUBIC_TOL2:
+                return X
+    if J > 0.0:
+        R, ok = _polar_newton(F)
+        if ok:
+            return R
+    return _polar_svd(F)
+
+
+@_jit
+def polar_points(F, out):
+    """R at each of N points, F and out ``(9, N)`` (tests compare with materials.svd)."""
+    for n in range(F.shape[1]):
+        r = polar_rotation((F[0, n], F[1, n], F[2, n], F[3, n], F[4, n], F[5, n],
+                            F[6, n], F[7, n], F[8, n]))
+        for k in range(9):
+            out[k, n] = r[k]
+
+
+@_jit
+def _vector_gradient(v, nodes, Dm_inv, e):
+    """L = sum_a v_a (x) dN_a of element e (= Ds(v) Dm^-1), a 9-tuple."""
+    k0, k1, k2, k3 = 3 * nodes[e, 0], 3 * nodes[e, 1], 3 * nodes[e, 2], 3 * nodes[e, 3]
+    u0, u1, u2 = v[k0], v[k0 + 1], v[k0 + 2]
+    a0, a1, a2 = v[k1] - u0, v[k1 + 1] - u1, v[k1 + 2] - u2
+    b0, b1, b2 = v[k2] - u0, v[k2 + 1] - u1, v[k2 + 2] - u2
+    c0, c1, c2 = v[k3] - u0, v[k3 + 1] - u1, v[k3 + 2] - u2
+    d = Dm_inv[e]
+    return (
+        a0 * d[0, 0] + b0 * d[1, 0] + c0 * d[2, 0],
+        a0 * d[0, 1] + b0 * d[1, 1] + c0 * d[2, 1],
+        a0 * d[0, 2] + b0 * d[1, 2] + c0 * d[2, 2],
+        a1 * d[0, 0] + b1 * d[1, 0] + c1 * d[2, 0],
+        a1 * d[0, 1] + b1 * d[1, 1] + c1 * d[2, 1],
+        a1 * d[0, 2] + b1 * d[1, 2] + c1 * d[2, 2],
+        a2 * d[0, 0] + b2 * d[1, 0] + c2 * d[2, 0],
+        a2 * d[0, 1] + b2 * d[1, 1] + c2 * d[2, 1],
+        a2 * d[0, 2] + b2 * d[1, 2] + c2 * d[2, 2],
+    )
+
+
+@_jit
+def warped_apply_p1(x, X, v, nodes, Dm_inv, V, prm, out):
+    """out = K(x) v = sum_e R_e K_e R_e^T v_e, the warped stiffness times v (P1, matrix-free).
+
+    K_e, the rest stiffness of a linear tet, is not read: it is the linear
+    elastic force of a field, ``(K_e w)_a = V sigma_lin(grad w) dN_a`` with
+    ``sigma_lin(G) = mu (G + G^T) + lam tr(G) I``, and for ``w_a = R^T v_a``
+    ``grad w = R^T L``, ``L = grad v``. So per element: R the polar rotation
+    of F (:func:`polar_rotation`), ``P = R sigma_lin(R^T L)`` and
+    ``out_a += V P dN_a``, scattered as :func:`gradient_p1` does. (The 12x12
+    K_e would be 1.2 kB per element to stream from memory: measured, that
+    path took ~1.6x as long.)
+
+    Parameters: x, X, v ``(ndofs,)``; nodes, Dm_inv, V the P1 geometry; prm
+    ``(mu, lam, 0)`` (Pa); out ``(ndofs,)``, overwritten.
+    """
+    mu, lam = prm[0], prm[1]
+    out[:] = 0.0
+    for e in range(nodes.shape[0]):
+        R = polar_rotation(_deformation_gradient(x, X, nodes, Dm_inv, e))
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+        L = _vector_gradient(v, nodes, Dm_inv, e)
+        # G = R^T L
+        g00 = r00 * L[0] + r10 * L[3] + r20 * L[6]
+        g01 = r00 * L[1] + r10 * L[4] + r20 * L[7]
+        g02 = r00 * L[2] + r10 * L[5] + r20 * L[8]
+        g10 = r01 * L[0] + r11 * L[3] + r21 * L[6]
+        g11 = r01 * L[1] + r11 * L[4] + r21 * L[7]
+        g12 = r01 * L[2] + r11 * L[5] + r21 * L[8]
+        g20 = r02 * L[0] + r12 * L[3] + r22 * L[6]
+        g21 = r02 * L[1] + r12 * L[4] + r22 * L[7]
+        g22 = r02 * L[2] + r12 * L[5] + r22 * L[8]
+        vol = V[e]
+        t = lam * (g00 + g11 + g22)
+        # V sigma_lin(G), symmetric
+        s00 = (mu * (g00 + g00) + t) * vol
+        s11 = (mu * (g11 + g11) + t) * vol
+        s22 = (mu * (g22 + g22) + t) * vol
+        s01, s02, s12 = mu * (g01 + g10) * vol, mu * (g02 + g20) * vol, mu * (g12 + g21) * vol
+        d = Dm_inv[e]
+        k0, k1, k2, k3 = 3 * nodes[e, 0], 3 * nodes[e, 1], 3 * nodes[e, 2], 3 * nodes[e, 3]
+        for i in range(3):
+            ri0, ri1, ri2 = R[3 * i], R[3 * i + 1], R[3 * i + 2]
+            q0 = ri0 * s00 + ri1 * s01 + ri2 * s02  # (V R sigma)_ij, row i
+            q1 = ri0 * s01 + ri1 * s11 + ri2 * s12
+            q2 = ri0 * s02 + ri1 * s12 + ri2 * s22
+            f1 = q0 * d[0, 0] + q1 * d[0, 1] + q2 * d[0, 2]
+            f2 = q0 * d[1, 0] + q1 * d[1, 1] + q2 * d[1, 2]
+            f3 = q0 * d[2, 0] + q1 * d[2, 1] + q2 * d[2, 2]
+            out[k1 + i] += f1
+            out[k2 + i] += f2
+            out[k3 + i] += f3
+            out[k0 + i] -= f1 + f2 + f3

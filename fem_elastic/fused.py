@@ -60,7 +60,7 @@ from .discretization import Discretization
 from .materials import LinearElastic, NeoHookean, StableNeoHookean, StVK
 from .materials.base import Material
 
-__all__ = ["available", "kernels_for", "registry", "FusedP1", "MaterialKernels"]
+__all__ = ["available", "kernels_for", "registry", "FusedP1", "MaterialKernels", "warped_apply"]
 
 #: Environment variable that switches the fused kernels off when set to ``0``.
 ENV = "FEM_ELASTIC_NUMBA"
@@ -272,3 +272,61 @@ def kernels_for(material: Material, space: Discretization) -> FusedP1 | None:
     if fused is None:
         fused = entry[1][material] = FusedP1(material, space)
     return fused
+
+
+# stiffness warping ----------------------------------------------------------------------
+def _geometry(space: Discretization) -> _P1Geometry:
+    """The cached P1 geometry of a space (built on first use, shared with :class:`FusedP1`)."""
+    entry = _cache.get(space)
+    if entry is None:
+        entry = _cache[space] = (_P1Geometry(space), {})
+    return entry[0]
+
+
+def _readonly(a, n: int, name: str) -> np.ndarray:
+    """a as a read-only, C-contiguous float ``(n,)`` view (a copy only if it is not one already)."""
+    a = np.ascontiguousarray(a, dtype=float)
+    if a.shape != (n,):
+        raise ValueError(f"{name} must have shape ({n},), got {a.shape}")
+    if a.flags.writeable:
+        a = a.view()
+        a.setflags(write=False)
+    return a
+
+
+def warped_apply(warped, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``K(x) v`` of a P1 :class:`~fem_elastic.stiffness_warping.WarpedStiffness`, in one pass.
+
+    Per element: F, its polar rotation R (an inverse-free cubic iteration
+    for moderate strains, scaled Newton for large ones, LAPACK's SVD for
+    inverted or degenerate elements: the rotation of the signed SVD, as
+    :func:`fem_elastic.materials.svd.polar_rotation`), then ``R K_e R^T
+    v_e`` scattered into the result, with ``K_e w`` evaluated as the linear
+    elastic force ``V sigma_lin(grad w) dN`` (the K_e of a P1 tet, never
+    read from memory). Agrees with the numpy path of
+    :meth:`WarpedStiffness.apply` to round-off. Call only where
+    :func:`available` is true.
+
+    Parameters
+    ----------
+    warped : WarpedStiffness
+        On a P1 space; its material's ``mu`` and ``lam`` (Pa) define K_e.
+    x : numpy.ndarray, shape (ndofs,)
+        DOF positions (m).
+    v : numpy.ndarray, shape (ndofs,)
+        Any DOF vector (e.g. velocities, m/s).
+
+    Returns
+    -------
+    numpy.ndarray, shape (ndofs,)
+        ``sum_e R_e K_e R_e^T v_e`` (N/m times v's unit), a new array.
+    """
+    space = warped.space
+    if space.order != 1:
+        raise ValueError(f"the fused warped stiffness is for P1 tets, got order {space.order}")
+    g = _geometry(space)
+    prm = (float(warped.material.mu), float(warped.material.lam), 0.0)
+    out = np.empty(g.ndofs)
+    _kernels().warped_apply_p1(_readonly(x, g.ndofs, "x"), g.X, _readonly(v, g.ndofs, "v"),
+                               g.nodes, g.Dm_inv, g.V, prm, out)
+    return out

@@ -311,7 +311,16 @@ class WarpedStiffness(Potential):
         >>> spin = np.cross([0, 0, 1.0], x.reshape(-1, 3)).ravel()   # its rigid spin velocity
         >>> bool(np.abs(w.apply(x, spin)).max() < 1e-6)
         True
+
+        For P1 with numba (:func:`fem_elastic.fused.available`) one fused pass
+        over the elements computes it (:func:`fem_elastic.fused.warped_apply`);
+        otherwise, and for P2, batched numpy products do (the reference).
         """
+        if self.space.order == 1:
+            from . import fused
+
+            if fused.available():
+                return fused.warped_apply(self, x, v)
         R = np.ascontiguousarray(np.moveaxis(self.rotations(x), -1, 0))  # (ne, 3, 3)
         ne, m, _ = self.element_matrices.shape
         ve = np.asarray(v, dtype=float)[self._dofs].reshape(ne, m // 3, 3)

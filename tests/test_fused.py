@@ -240,3 +240,133 @@ def test_model_uses_the_fused_path(monkeypatch):
     g = model.gradient(x)
     g_np = numpy_path(monkeypatch, lambda: model.gradient(x))
     assert np.linalg.norm(g - g_np) <= RTOL * np.linalg.norm(g_np)
+
+
+# stiffness warping: the polar rotation and K(x) v ------------------------------------------
+def _rotations(rng, n):
+    """n random proper rotations, (3, 3, n), from normalized quaternions."""
+    q = rng.standard_normal((4, n))
+    w, a, b, c = q / np.linalg.norm(q, axis=0)
+    return np.array([
+        [1 - 2 * (b * b + c * c), 2 * (a * b - c * w), 2 * (a * c + b * w)],
+        [2 * (a * b + c * w), 1 - 2 * (a * a + c * c), 2 * (b * c - a * w)],
+        [2 * (a * c - b * w), 2 * (b * c + a * w), 1 - 2 * (a * a + b * b)],
+    ])
+
+
+@needs_numba
+@pytest.mark.parametrize("s_lo, s_hi, inverted", [
+    (0.999, 1.001, False),  # small strain: two cubic steps
+    (0.72, 1.22, False),    # |F^T F - I| < 0.5: more cubic steps
+    (0.2, 5.0, False),      # large stretches: scaled Newton
+    (1e-7, 1e-4, False),    # crushed to a point (det > 0): Newton copes with cond ~1e3
+    (0.3, 2.0, True),       # inverted (det < 0): LAPACK's SVD, signed
+], ids=["small", "moderate", "large", "crushed", "inverted"])
+def test_polar_rotation_kernel_is_the_signed_svd_rotation(s_lo, s_hi, inverted):
+    """F = U diag(s) V^T built with known rotations: the kernel returns U V^T, as the numpy
+    polar_rotation does (for det F < 0 the sign goes on the smallest |s|, det R = +1)."""
+    from fem_elastic.materials.svd import polar_rotation
+
+    rng = np.random.default_rng(3)
+    n = 2000
+    U, V = _rotations(rng, n), _rotations(rng, n)
+    s = np.sort(rng.uniform(s_lo, s_hi, (3, n)), axis=0)[::-1]
+    s[1] = np.maximum(s[1], 2.0 * s[2])  # keep s_2 + s_3 and s_2 - |s_3| away from 0
+    if inverted:
+        s[2] *= -1.0
+    F = np.einsum("iak,ak,jak->ijk", U, s, V)
+    R_exact = np.einsum("iak,jak->ijk", U, V)
+    R = np.empty((9, n))
+    fused._kernels().polar_points(np.ascontiguousarray(F.reshape(9, n)), R)
+    R = R.reshape(3, 3, n)
+    # R's condition number is ~s_1 / (s_2 +- s_3) <= ~1e3 here
+    assert np.abs(R - R_exact).max() < 1e-12
+    assert np.abs(R - polar_rotation(F)).max() < 1e-12
+
+
+@needs_numba
+def test_polar_rotation_kernel_special_matrices():
+    k = fused._kernels()
+    F = np.array([np.eye(3).ravel(), np.zeros(9), np.diag([1.0, 1.0, -1.0]).ravel(),
+                  np.full(9, np.nan)]).T.copy()
+    R = np.empty_like(F)
+    k.polar_points(F, R)
+    np.testing.assert_array_equal(R[:, 0], np.eye(3).ravel())  # exact at rest
+    for j in (1, 2):  # F = 0 and a mirror: some proper rotation, as the numpy path
+        Rj = R[:, j].reshape(3, 3)
+        assert np.allclose(Rj @ Rj.T, np.eye(3), atol=1e-14) and np.linalg.det(Rj) > 0
+    assert np.isnan(R[:, 3]).all()  # non-finite F: NaN, no exception
+
+
+def _warped(sp):
+    from fem_elastic.stiffness_warping import WarpedStiffness
+
+    return WarpedStiffness(sp, fe.Corotated(E, NU))
+
+
+def _apply_both(monkeypatch, w, x, v):
+    fused_result = w.apply(x, v)
+    return fused_result, numpy_path(monkeypatch, lambda: w.apply(x, v))
+
+
+def _rel(a, b):
+    return np.abs(a - b).max() / np.abs(b).max()
+
+
+@needs_numba
+@pytest.mark.parametrize("noise", [1e-4, 1e-3, 5e-3], ids=["small", "moderate", "large"])
+def test_warped_apply_matches_the_numpy_path(noise, monkeypatch):
+    """A large rotation of random deformations: nodal noise of 1e-4 to 5e-3 m on cells of
+    ~0.04 m, strains from ~1e-2 (cubic iteration) to ~0.5 (most elements on Newton's path,
+    J down to 0.46)."""
+    s = space()
+    w = _warped(s)
+    rng = np.random.default_rng(17)
+    Q = _rotations(rng, 1)[..., 0]
+    x = ((s.X + noise * rng.standard_normal(s.ndofs)).reshape(-1, 3) @ Q.T + [1.0, -2.0, 0.5])
+    x = x.ravel()
+    assert det3(s.deformation_gradient(x - s.X)).min() > 0
+    v = rng.standard_normal(s.ndofs)
+    Kv, Kv_np = _apply_both(monkeypatch, w, x, v)
+    assert _rel(Kv, Kv_np) < RTOL
+
+
+@needs_numba
+def test_warped_apply_with_inverted_and_degenerate_elements(monkeypatch):
+    s = space()
+    w = _warped(s)
+    rng = np.random.default_rng(5)
+    x = s.X + 2e-3 * rng.standard_normal(s.ndofs)
+    p = x.reshape(-1, 3)
+    t = s.mesh.t
+    # element 0: vertex 0 pushed through the opposite face (inverted)
+    a, opp = t[0, 0], t[1:, 0]
+    p[a] = p[a] + 1.6 * (p[opp].mean(axis=0) - p[a])
+    # an element sharing no vertex with element 0: vertex 0 moved to 1e-8 of its
+    # height above the opposite face (nearly degenerate, det F ~ 1e-8)
+    e = next(e for e in range(t.shape[1]) if not set(t[:, e]) & set(t[:, 0]))
+    b, opp = t[0, e], t[1:, e]
+    c = p[opp].mean(axis=0)
+    p[b] = c + 1e-8 * (p[b] - c)
+    J = det3(s.deformation_gradient(x - s.X))[:, 0]
+    assert J[0] < 0 and 0 < J[e] < 1e-7
+    v = rng.standard_normal(s.ndofs)
+    Kv, Kv_np = _apply_both(monkeypatch, w, x, v)
+    assert np.isfinite(Kv).all()
+    assert _rel(Kv, Kv_np) < RTOL
+
+
+@needs_numba
+def test_warped_apply_takes_the_fused_path_for_p1_only(monkeypatch):
+    calls = []
+    original = fused.warped_apply
+    monkeypatch.setattr(fused, "warped_apply", lambda *a: calls.append(1) or original(*a))
+    for order, expected in ((1, 1), (2, 0)):
+        calls.clear()
+        w = _warped(space(order))
+        w.apply(w.space.X, np.ones(w.space.ndofs))
+        assert len(calls) == expected
+    calls.clear()
+    w = _warped(space())
+    numpy_path(monkeypatch, lambda: w.apply(w.space.X, np.ones(w.space.ndofs)))
+    assert not calls
