@@ -120,7 +120,8 @@ class DirectSolver:
     array([1., 2., 3.])
     """
 
-    def solve(self, A, b, near_null=None) -> LinearSolve:
+    def solve(self, A, b, near_null=None, rtol=None) -> LinearSolve:
+        """Solve A x = b exactly (``rtol`` is accepted for a common interface and ignored)."""
         t0 = time.perf_counter()
         A = sp.csr_matrix(A)
         lu = _FACTORS.get(A)
@@ -169,7 +170,9 @@ class AMGSolver:
         if not (0 < self.rtol < 1):
             raise InvalidParameter(f"AMGSolver rtol must be in (0, 1), got {self.rtol!r}.")
 
-    def solve(self, A, b, near_null=None) -> LinearSolve:
+    def solve(self, A, b, near_null=None, rtol=None) -> LinearSolve:
+        """Solve A x = b by AMG-preconditioned CG to ``rtol`` (default: the solver's own)."""
+        rtol = self.rtol if rtol is None else max(float(rtol), self.rtol)
         try:
             import pyamg
         except ImportError:  # pragma: no cover - depends on the environment
@@ -196,13 +199,13 @@ class AMGSolver:
             max_coarse=500,
         )
         residuals: list[float] = []
-        x = ml.solve(b, tol=self.rtol, accel="cg", maxiter=self.maxiter, residuals=residuals)
+        x = ml.solve(b, tol=rtol, accel="cg", maxiter=self.maxiter, residuals=residuals)
         rel = _relative_residual(A, x, b) if np.all(np.isfinite(x)) else np.inf
         its = max(len(residuals) - 1, 0)
-        if not rel <= 10 * self.rtol:  # CG's own test is in the preconditioned norm: allow 10x
+        if not rel <= 10 * rtol:  # CG's own test is in the preconditioned norm: allow 10x
             raise LinearSolverFailed(
                 f"AMG-CG reached a relative residual of {rel:.2e} after {its} iterations "
-                f"(asked {self.rtol:.1e}): the matrix may be indefinite or badly conditioned. "
+                f"(asked {rtol:.1e}): the matrix may be indefinite or badly conditioned. "
                 "Use linear_solver=fe.DirectSolver(), or raise maxiter.",
                 result=LinearSolve(x, "amg-cg", its, rel, time.perf_counter() - t0),
             )
@@ -233,10 +236,11 @@ class AutoSolver:
     amg: AMGSolver = AMGSolver()
     fallback: bool = True
 
-    def solve(self, A, b, near_null=None) -> LinearSolve:
+    def solve(self, A, b, near_null=None, rtol=None) -> LinearSolve:
+        """Direct below ``max_direct_dofs``, AMG-CG (to ``rtol`` if given) above."""
         if A.shape[0] > self.max_direct_dofs and _have_pyamg():
             try:
-                return self.amg.solve(A, b, near_null)
+                return self.amg.solve(A, b, near_null, rtol=rtol)
             except LinearSolverFailed as exc:
                 if not self.fallback:
                     raise

@@ -27,6 +27,7 @@ in its quadratic regime there).
 
 from __future__ import annotations
 
+import inspect
 import logging
 import math
 import time
@@ -39,6 +40,14 @@ import scipy.sparse as sp
 from .linear_solvers import AutoSolver, LinearSolverFailed, SingularMatrix
 
 __all__ = ["NewtonResult", "newton_minimize"]
+
+
+def _takes_rtol(solver) -> bool:
+    """Whether ``solver.solve`` accepts an ``rtol`` keyword (ours do; a user's may not)."""
+    try:
+        return "rtol" in inspect.signature(solver.solve).parameters
+    except (TypeError, ValueError):
+        return False
 
 log = logging.getLogger(__name__)
 
@@ -114,6 +123,7 @@ def newton_minimize(
     project: bool = True,
     g_floor: float = 0.0,
     gradient: Callable[[np.ndarray], np.ndarray] | None = None,
+    inexact: bool = True,
 ) -> NewtonResult:
     """Minimise ``energy`` from ``x0`` over the free DOFs.
 
@@ -163,6 +173,13 @@ def newton_minimize(
         first tested for convergence with the gradient only, so the
         converged iterate costs no Hessian assembly (a linear problem then
         takes one assembly instead of two).
+    inexact : bool
+        Inexact Newton: an iterative linear solver stops at a relative
+        residual ``eta = min(1e-2, 0.1 ||g|| / ||g_0||)`` instead of its own
+        tight tolerance (the forcing term of Eisenstat and Walker 1996, in
+        its simplest form). Far from the solution a rough direction is as
+        good as an exact one; as ``||g||`` falls eta falls with it, which
+        keeps Newton's fast local convergence. Direct solvers ignore it.
 
     Returns
     -------
@@ -206,8 +223,9 @@ def newton_minimize(
             break
         # on an exact tangent, a stalled CG is answered by projecting, not by a big LU
         strict = solver.strict() if exact and project and hasattr(solver, "strict") else solver
+        eta = min(1e-2, 0.1 * gnorm / result.residual_history[0]) if inexact else None
         try:
-            dx, slope = _direction(strict, H, g, free, pattern, near_null, result)
+            dx, slope = _direction(strict, H, g, free, pattern, near_null, result, eta)
         except LinearSolverFailed:
             if not (exact and project):
                 raise
@@ -219,7 +237,7 @@ def newton_minimize(
             t0 = time.perf_counter()
             _, H = linearize(x, True)
             result.seconds["linearize"] += time.perf_counter() - t0
-            dx, slope = _direction(solver, H, g, free, pattern, near_null, result)
+            dx, slope = _direction(solver, H, g, free, pattern, near_null, result, eta)
         if not slope < 0:  # still no descent direction: steepest descent
             log.debug("Newton direction is not a descent direction; using -g")
             # keep the Newton step's length; without one, a step of -g / max diag(H)
@@ -264,17 +282,19 @@ def newton_minimize(
     return result
 
 
-def _direction(solver, H, g, free, pattern, near_null, result):
-    """Solve H dx = -g on the free DOFs; returns dx and the slope g . dx."""
+def _direction(solver, H, g, free, pattern, near_null, result, rtol=None):
+    """Solve H dx = -g on the free DOFs (to ``rtol`` if the solver is iterative);
+    returns dx and the slope g . dx."""
     t0 = time.perf_counter()
     A = constrain(H, free, pattern)
+    kw = {"rtol": rtol} if rtol is not None and _takes_rtol(solver) else {}
     try:
-        lin = solver.solve(A, -g, near_null)
+        lin = solver.solve(A, -g, near_null, **kw)
     except SingularMatrix:
         # A PSD projection can leave a direction with no stiffness at all;
         # a small diagonal shift restores a descent direction.
         shift = 1e-8 * float(np.abs(A.diagonal()).max())
-        lin = solver.solve(A + shift * sp.identity(A.shape[0], format="csr"), -g, near_null)
+        lin = solver.solve(A + shift * sp.identity(A.shape[0], format="csr"), -g, near_null, **kw)
     result.seconds["solve"] += time.perf_counter() - t0
     result.linear_iterations += lin.iterations
     dx = np.where(free, lin.x, 0.0)
