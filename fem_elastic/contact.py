@@ -21,9 +21,13 @@ three ways, chosen by ``method``:
         b(d) = 0 for d >= dhat,   b(d) = +inf for d <= 0,
 
     C2 at ``d = dhat``. The energy is +inf at any penetration, so Newton's
-    backtracking line search (which backs off from +inf) never lets a node
-    through: no node ever penetrates, and a loaded node rests at a gap
-    between ``dhat / 2`` and ``dhat`` (see *Barrier stiffness*).
+    backtracking line search (which backs off from +inf) never ends a step
+    with a node inside, and a loaded node rests at a gap between
+    ``dhat / 2`` and ``dhat`` (see *Barrier stiffness*). There is no
+    continuous collision detection: only the end of each step is tested,
+    so a node fast enough to cross a *thin* obstacle (a slab, a small box
+    or sphere) within one step passes through it. The ground, a half-space,
+    cannot be crossed this way.
 ``"impulse"``
     No potential: after each step the integrator calls :meth:`Obstacle.respond`,
     which projects penetrating nodes back onto the surface and reflects their
@@ -34,8 +38,9 @@ three ways, chosen by ``method``:
 Penalty stiffness
 -----------------
 Every node gets the same spring, ``k = M |g| / penetration`` (N/m), with ``M``
-the body's total mass (kg), ``|g|`` the ``gravity`` keyword (9.81 m/s^2 by
-default) and ``penetration`` (m) the design tolerance: one node alone would
+the body's total mass (kg), ``|g|`` the model's gravity (9.81 m/s^2 for a
+model without gravity; the obstacle's ``gravity`` keyword overrides it) and
+``penetration`` (m) the design tolerance: one node alone would
 carry the body's whole weight at that depth. A body resting on a plane under
 its own weight pushes on it with non-negative nodal forces ``k delta_i`` that
 add up to ``M |g|``, so **every node penetrates at most ``penetration``**,
@@ -200,7 +205,12 @@ class ContactPotential(Potential):
         self.obstacle = obstacle
         self.ndofs = X.size
         nn = self.ndofs // 3
-        w = np.broadcast_to(np.asarray(weights, dtype=float), (nn,)).copy()
+        try:
+            w = np.broadcast_to(np.asarray(weights, dtype=float), (nn,)).copy()
+        except (TypeError, ValueError):
+            raise InvalidParameter(
+                f"contact stiffness must be a number (N/m) or one per node ({nn}), got {weights!r}."
+            ) from None
         if not np.all(np.isfinite(w)) or np.any(w <= 0):
             raise InvalidParameter("contact stiffness must be finite and > 0 N/m at every node.")
         self.weights = w
@@ -423,9 +433,10 @@ class Obstacle:
         Impulse: coefficient of restitution ``e`` in [0, 1] (0 plastic, 1 elastic).
     friction : float
         Impulse: Coulomb friction coefficient ``mu >= 0``.
-    gravity : float
+    gravity : float or None
         Magnitude of the acceleration (m/s^2) whose weight the penalty and
-        barrier stiffness are designed to carry (the model's ``|g|``).
+        barrier stiffness are designed to carry. None (default): the model's
+        ``|g|``, or 9.81 when the model has no gravity.
 
     Examples
     --------
@@ -436,7 +447,7 @@ class Obstacle:
     """
 
     def __init__(self, *, method="penalty", stiffness=None, penetration=1e-3, dhat=1e-3,
-                 restitution=0.0, friction=0.0, gravity=9.81):
+                 restitution=0.0, friction=0.0, gravity=None):
         if not isinstance(method, str) or method not in METHODS:
             raise InvalidParameter(
                 f"method must be one of {METHODS!r}, got {method!r}: 'penalty' (springs, "
@@ -447,7 +458,7 @@ class Obstacle:
         self.stiffness = None if stiffness is None else _positive(stiffness, "stiffness", "N/m", "1e4")
         self.penetration = _positive(penetration, "penetration", "m", "1e-3")
         self.dhat = _positive(dhat, "dhat", "m", "1e-3")
-        self.gravity = _positive(gravity, "gravity", "m/s^2", "9.81")
+        self.gravity = None if gravity is None else _positive(gravity, "gravity", "m/s^2", "9.81")
         if isinstance(restitution, bool) or not isinstance(restitution, (int, float, np.number)) \
                 or not 0.0 <= float(restitution) <= 1.0:
             raise InvalidParameter(
@@ -493,7 +504,13 @@ class Obstacle:
             raise InvalidParameter("nodal_mass must be finite and > 0 kg at every node.")
         return m
 
-    def node_stiffness(self, nodal_mass) -> float:
+    def _g(self, gravity) -> float:
+        """|g| (m/s^2) of the stiffness rule: the obstacle's own, else the model's, else 9.81."""
+        if self.gravity is not None:
+            return self.gravity
+        return float(gravity) if gravity else 9.81
+
+    def node_stiffness(self, nodal_mass, gravity=None) -> float:
         """The per-node stiffness (N/m) the rules give a body with these nodal masses.
 
         Penalty: ``k = M |g| / penetration``; barrier:
@@ -512,10 +529,10 @@ class Obstacle:
         if self.stiffness is not None:
             return self.stiffness
         if self.method == "penalty":
-            return M * self.gravity / self.penetration
-        return M * self.gravity / (_BARRIER_SLOPE_AT_HALF * self.dhat)
+            return M * self._g(gravity) / self.penetration
+        return M * self._g(gravity) / (_BARRIER_SLOPE_AT_HALF * self.dhat)
 
-    def critical_omega(self, nodal_mass) -> float:
+    def critical_omega(self, nodal_mass, gravity=None) -> float:
         """Largest angular frequency (rad/s) of a node on its contact spring.
 
         ``max_i sqrt(k / m_i)`` for the penalty (the barrier: its stiffness at
@@ -540,10 +557,10 @@ class Obstacle:
         c = 1.0
         if self.method == "barrier":
             c = float(_barrier_profile(np.array(0.5 * self.dhat), self.dhat)[2])
-        return float(np.sqrt(c * self.node_stiffness(m) / m.min()))
+        return float(np.sqrt(c * self.node_stiffness(m, gravity) / m.min()))
 
     # the two responses ---------------------------------------------------------------------
-    def build(self, space, nodal_mass):
+    def build(self, space, nodal_mass, gravity=None):
         """The contact Potential on every node of ``space``, or None for ``method="impulse"``.
 
         Parameters
@@ -552,6 +569,8 @@ class Obstacle:
             The body's finite element space (its ``X``, ``(ndofs,)``, m).
         nodal_mass : array_like
             ``(nnodes,)`` lumped mass per node (kg), e.g. ``model.lumped_mass[0::3]``.
+        gravity : float, optional
+            The model's ``|g|`` (m/s^2), used unless the obstacle was given its own.
 
         Returns
         -------
@@ -578,7 +597,7 @@ class Obstacle:
         m = self._check_mass(nodal_mass, X.size // 3)
         if self.method == "impulse":
             return None
-        k = self.node_stiffness(m)
+        k = self.node_stiffness(m, gravity)
         if self.method == "penalty":
             return PenaltyContact(self, X, k, nodal_mass=m)
         d = self.signed_distance(X.reshape(-1, 3))

@@ -111,9 +111,10 @@ class Model:
         self.loads = tuple(loads)
         self.damping = self._check_damping(damping)
         self.obstacles = self._check_obstacles(ground)
+        self.gravity_magnitude = 0.0 if gravity is None else float(np.linalg.norm(gravity))
         contacts = []
         for obstacle in self.obstacles:
-            term = obstacle.build(self.space, self.lumped_mass[0::3])
+            term = obstacle.build(self.space, self.lumped_mass[0::3], self.gravity_magnitude or None)
             if term is not None:
                 contacts.append(term)
         self.contacts = tuple(contacts)

@@ -78,9 +78,10 @@ fe.ElasticBody (any P1 mesh)        1                   nu
 =================================  ==================  ===================
 
 The network is far from isotropic: with van Gelder's constants the Young
-modulus is 0.286 E along the (1, 1, 1) diagonal and 0.128 E along (1, -1, 0)
-(no spring runs that way); its Poisson ratio along the axes is 1/29, not
-1/4. The Lloyd fit to a nearly incompressible target (nu -> 1/2) raises
+modulus is 10/7 E = 1.43 E along the (1, 1, 1) diagonal that every cell's
+six tets share, 5/6 E along the face diagonal (1, 1, 0), and 3/8 E along
+(1, -1, 0), where no spring runs; its Poisson ratio along the axes is 1/29,
+not 1/4 (exact fractions from the same formula, asserted in the tests). The Lloyd fit to a nearly incompressible target (nu -> 1/2) raises
 every constant, since springs cannot stiffen the volume alone: with
 nu = 0.45 the axial modulus is 3.8 E. This is why :class:`MassSpring`
 defaults to van Gelder's constants and nu = 1/4.
@@ -544,8 +545,9 @@ class MassSpring:
     What is honoured: E sets the scale of every spring constant, so
     stiffness is proportional to E; the moduli the network actually has
     depend on the calibration and on the mesh (on :func:`fe.beam_mesh`, van
-    Gelder's constants give 30/29 E along the axes, and much less across
-    them: see the module docstring). nu is not representable (see below).
+    Gelder's constants give 30/29 E along the axes, 10/7 E along the cells'
+    shared diagonal and 3/8 E across it: see the module docstring). nu is
+    not representable (see below).
 
     Parameters
     ----------
@@ -637,7 +639,13 @@ class MassSpring:
                 f"MassSpring needs a linear (order 1) discretization, got order {space.order}."
             )
         mesh = space.mesh
-        k = np.asarray(self.calibration(mesh, self.E, self.nu), dtype=float)
+        try:
+            k = np.asarray(self.calibration(mesh, self.E, self.nu), dtype=float)
+        except TypeError as exc:
+            raise InvalidParameter(
+                f"the calibration must be a function (mesh, E, nu) -> k per edge, e.g. "
+                f"fe.van_gelder_stiffness; calling {self.calibration!r} failed: {exc}."
+            ) from None
         n_edges = mesh.edges.shape[1]
         if k.shape != (n_edges,) or not np.all(np.isfinite(k)) or np.any(k < 0):
             raise InvalidParameter(

@@ -403,3 +403,26 @@ def test_bad_parameters_raise_invalid_parameter(make, word):
     with pytest.raises(InvalidParameter, match=word.replace("(", r"\(")) as info:
         make()
     assert isinstance(info.value, fe.FemElasticError)
+
+
+def test_contact_stiffness_follows_the_models_gravity_unless_given():
+    cube = fe.beam_mesh(length=0.1, width=0.1, height=0.1, cells=(1, 1, 1))
+    body = fe.ElasticBody(fe.LinearElastic(E=1e5, nu=0.3))
+    k = {}
+    for g, own in ((9.81, None), (19.62, None), (19.62, 9.81), (None, None)):
+        model = fe.Model(cube, density=1000.0, body=body, gravity=None if g is None else (0, 0, -g),
+                         ground=fe.Ground(-1.0, gravity=own))
+        k[g, own] = model.contacts[0].weights[0]
+    assert k[19.62, None] == pytest.approx(2 * k[9.81, None])  # twice the weight: twice as stiff
+    assert k[19.62, 9.81] == pytest.approx(k[9.81, None])  # the obstacle's own |g| wins
+    assert k[None, None] == pytest.approx(k[9.81, None])  # no gravity: 9.81 m/s^2
+
+
+def test_bad_stiffness_arrays_and_calibrations_are_refused():
+    with pytest.raises(fe.InvalidParameter, match="stiffness"):
+        PenaltyContact(Ground(), np.zeros(6), [1.0, 2.0, 3.0])
+    with pytest.raises(fe.InvalidParameter, match="stiffness"):
+        PenaltyContact(Ground(), np.zeros(6), "a")
+    with pytest.raises(fe.InvalidParameter, match="calibration"):
+        fe.Model(fe.beam_mesh(cells=(1, 1, 1)), density=1.0,
+                 body=fe.MassSpring(E=1.0, calibration=lambda mesh: mesh))

@@ -477,3 +477,32 @@ def test_spring_potential_checks_its_arrays(edges, k, says):
     with pytest.raises(fe.InvalidParameter) as err:
         SpringPotential(np.array([0.0, 0, 0, 1, 0, 0]), edges, k)
     assert says in str(err.value)
+
+
+def test_van_gelder_network_is_anisotropic_as_documented():
+    """Young's modulus along a direction n, 1 / (s . S s) with s the Voigt form of n n (stress
+    n n, engineering strains), from the 6x6 stiffness of the network under homogeneous strains.
+
+    With van Gelder's constants the block's energy is a sum over tets (k l^2 = E sum V_t), so
+    free surfaces do not enter and the values are the lattice's exact fractions (documented in
+    fem_elastic.springs): 30/29 along x, 10/7 along the shared diagonal (1, 1, 1), 5/6 along
+    the face diagonal (1, 1, 0), 3/8 along (1, -1, 0). Tolerance: round-off of a 6x6 inverse.
+    """
+    space = Discretization(fe.beam_mesh(2.0, 1.0, 1.0, cells=(4, 2, 2)), 1)
+    pot = MassSpring(E=1.0).build(space)
+    Xp = space.X.reshape(-1, 3)
+    U = []
+    for a, b in VOIGT:
+        eps = np.zeros((3, 3))
+        eps[a, b] = eps[b, a] = 1.0 if a == b else 0.5
+        U.append((Xp @ eps.T).ravel())
+    U = np.array(U).T
+    S = np.linalg.inv(U.T @ (pot.hessian(space.X) @ U) / 2.0)  # block volume 2 m^3
+
+    def modulus(n):
+        n = np.asarray(n, float) / np.linalg.norm(n)
+        s = np.array([n[a] * n[b] for a, b in VOIGT])
+        return 1.0 / (s @ S @ s)
+
+    for n, expected in (((1, 0, 0), 30 / 29), ((1, 1, 1), 10 / 7), ((1, 1, 0), 5 / 6), ((1, -1, 0), 3 / 8)):
+        assert abs(modulus(n) - expected) < 1e-12, (n, modulus(n), expected)
