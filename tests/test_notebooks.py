@@ -6,9 +6,15 @@ kernel inherits the test process's environment) from a copy in a temporary
 directory, so the committed files are never touched. A notebook checks its own
 conclusions with asserts, so "it ran" already means "its claims held"; the
 test also looks for the generated conclusions and the plots.
+
+Each notebook prints a digest of the library's source (``fem_elastic source: ...``)
+in its first code cell; the committed full run must show the digest of the
+current source, so a library change that was not followed by a re-execution of
+the notebooks (see notebooks/README.md) fails here.
 """
 
 import hashlib
+import re
 import shutil
 import sys
 from pathlib import Path
@@ -57,6 +63,29 @@ def _digest(path):
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def source_digest(package_dir):
+    """sha256 over the library's source: every *.py under the package, sorted by path relative to it,
+    hashing each relative path and the file's bytes. The notebooks' first code cell has the same function."""
+    package_dir = Path(package_dir)
+    h = hashlib.sha256()
+    for rel in sorted(p.relative_to(package_dir).as_posix() for p in package_dir.rglob("*.py")):
+        h.update(rel.encode() + b"\0")
+        h.update((package_dir / rel).read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def _library_digest():
+    """The first 16 hex digits of the source digest of the fem_elastic that the tests (and kernels) import."""
+    import fem_elastic
+
+    return source_digest(Path(fem_elastic.__file__).parent)[:16]
+
+
+def _printed_digest(text):
+    found = re.findall(r"fem_elastic source: ([0-9a-f]{16})", text)
+    return found[0] if len(found) == 1 else None
+
+
 @pytest.mark.parametrize("name", sorted(EXPECTED))
 def test_notebook_runs_in_quick_mode(name, tmp_path, monkeypatch):
     committed = NOTEBOOKS / name
@@ -78,6 +107,8 @@ def test_notebook_runs_in_quick_mode(name, tmp_path, monkeypatch):
     # the kernel saw the quick switch, and ran the Python the tests run
     assert "QUICK = True" in text
     assert f"python: {sys.executable}" in text, text.splitlines()[0]
+    # the notebook's digest of the library source is the test's (the two functions agree)
+    assert _printed_digest(text) == _library_digest(), text.splitlines()[0]
     # the notebook's own asserts on its conclusions passed, and the conclusions were generated
     assert "all conclusions checked" in text
     phrases, n_plots = EXPECTED[name]
@@ -96,5 +127,10 @@ def test_committed_notebook_carries_a_full_run(name):
     text, markdown, images, errors = _outputs(nb)
     assert not errors, errors
     assert "QUICK = False" in text and "all conclusions checked" in text
+    printed, current = _printed_digest(text), _library_digest()
+    assert printed == current, (
+        f"{name}: the committed outputs were computed with fem_elastic source {printed or '(none printed)'}, but the "
+        f"source is now {current}: re-execute the notebooks in full and commit them (command in notebooks/README.md)"
+    )
     assert images >= EXPECTED[name][1]
     assert (NOTEBOOKS / name).stat().st_size < 1_000_000
