@@ -110,6 +110,7 @@ class SparsityPattern:
         self.nnz = idx.size
         self._row_of = np.repeat(np.arange(ndofs, dtype=np.int64), np.diff(self.indptr))
         self._touching_cache = (None, None)
+        self._positions_cache = None
 
     def owns(self, A) -> bool:
         """Whether the sparse matrix ``A`` was assembled on this pattern."""
@@ -131,6 +132,29 @@ class SparsityPattern:
         n = self.shape[0]
         keys = self._row_of * n + self.indices.astype(np.int64)
         return np.searchsorted(keys, np.arange(n, dtype=np.int64) * (n + 1))
+
+    def positions_of(self, A) -> np.ndarray | None:
+        """Positions in the data array of the entries of CSR ``A``, or None if one is outside.
+
+        Lets a matrix whose pattern is a subset of this one (a mass matrix)
+        be added in place into a matrix assembled here:
+        ``H.data[pattern.positions_of(M)] += c * M.data``. ``A`` must have
+        sorted indices. The map of the last matrix asked for is kept (it is
+        asked for at every Newton iteration, always for the same matrix).
+        """
+        last = self._positions_cache
+        if last is not None and last[0] is A:
+            return last[1]
+        n = self.shape[0]
+        keys = self._row_of * n + self.indices.astype(np.int64)
+        a_rows = np.repeat(np.arange(A.shape[0], dtype=np.int64), np.diff(A.indptr))
+        a_keys = a_rows * n + A.indices
+        pos = np.searchsorted(keys, a_keys)
+        inside = pos < keys.size
+        inside[inside] = keys[pos[inside]] == a_keys[inside]
+        pos = pos if A.shape == self.shape and inside.all() else None
+        self._positions_cache = (A, pos)
+        return pos
 
     def entries_touching(self, dofs_mask: np.ndarray) -> np.ndarray:
         """Boolean mask over the data array: entries whose row or column is in the mask.

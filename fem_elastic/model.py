@@ -156,10 +156,10 @@ class Model:
         return lumped_mass(self.space, self.density)
 
     # energy: every term through the Potential protocol ----------------------------
-    def _scaled_terms(self, load_factor: float):
+    def _scaled_terms(self, load_factor: float, body=None):
         """(potential, factor) pairs: the body and contacts at 1, each load at the load factor."""
         return (
-            [(self.body_potential, 1.0)]
+            [(self.body_potential if body is None else body, 1.0)]
             + [(load, load_factor) for load in self.loads]
             + [(c, 1.0) for c in self.contacts]
         )
@@ -204,7 +204,7 @@ class Model:
                 mv = self.lumped_mass * v if mass == "lumped" else self.mass_matrix @ v
                 f -= self.damping.alpha * mv
             if self.damping.beta:
-                warped = self._warped_stiffness
+                warped = self.warped_stiffness
                 Kv = warped.apply(x, v) if warped is not None else self.damping_stiffness(x) @ v
                 f -= self.damping.beta * Kv
         body_damping = getattr(self.body_potential, "damping_force", None)
@@ -240,13 +240,20 @@ class Model:
         tumbling body is not braked (the plain rest stiffness K_0 would
         brake it). Other bodies use their PSD-projected Hessian at x.
         """
-        warped = self._warped_stiffness
+        warped = self.warped_stiffness
         if warped is not None:
             return warped.hessian(x)
         return self.body_potential.hessian(x, project=True)
 
     @cached_property
-    def _warped_stiffness(self):
+    def warped_stiffness(self):
+        """The body's linear-elastic element stiffness, rotated per element (stiffness warping).
+
+        A :class:`fem_elastic.WarpedStiffness` of a finite element body, built
+        on first use and shared by stiffness-proportional damping and
+        :class:`fe.LinearizedImplicitEuler`; None for a body without a
+        material (springs).
+        """
         material = getattr(self.body_potential, "material", None)
         if material is None or not hasattr(material, "mu"):
             return None
@@ -391,16 +398,17 @@ class Model:
             g += c * term.gradient(x)
         return g
 
-    def linearize(self, x: np.ndarray, load_factor: float = 1.0, project: bool = True):
+    def linearize(self, x: np.ndarray, load_factor: float = 1.0, project: bool = True, body=None):
         """Gradient (N) and Hessian (N/m, CSR) of Pi at x.
 
         ``project=True`` returns the per-point PSD projection of the tangent,
         which makes Newton's step a descent direction. Terms whose Hessian is
-        zero (dead loads) return None and add nothing.
+        zero (dead loads) return None and add nothing. ``body``, a Potential,
+        stands in for the body's own (e.g. ``model.warped_stiffness``).
         """
         g = np.zeros(self.ndofs)
         H = None
-        for term, c in self._scaled_terms(load_factor):
+        for term, c in self._scaled_terms(load_factor, body):
             gt, Ht = term.linearize(x, project=project)
             g += c * gt
             if Ht is not None:

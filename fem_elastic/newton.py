@@ -141,8 +141,8 @@ def newton_minimize(
     rtol : float
         Converged when ||g_free|| <= rtol * g_scale.
     g_scale : float, optional
-        Force scale (N) of the problem, e.g. the norm of the external load.
-        Default: ||g_free(x0)||.
+        Force scale (N) of the problem, e.g. the norm of the external load;
+        the larger of it and ||g_free(x0)|| is used (default: the latter).
     max_iter : int
         Most Newton iterations.
     linear_solver : object with ``solve(A, b, near_null)``
@@ -212,8 +212,8 @@ def newton_minimize(
         if not math.isfinite(gnorm):
             result.message = "the gradient is not finite"
             return result
-        if g_scale is None:
-            g_scale = gnorm
+        if it == 0:
+            g_scale = gnorm if g_scale is None else max(g_scale, gnorm)
         if gnorm <= rtol * g_scale or gnorm == 0.0:
             result.converged = True
             result.message = f"||g|| = {gnorm:.3e} N <= {rtol:.1e} * {g_scale:.3e} N"

@@ -137,7 +137,8 @@ def simulate(
     for k in ("seconds_linearize", "seconds_solve", "seconds_line_search", "seconds_step"):
         stats[k] = np.zeros(n_steps)
     t_start = time.perf_counter()
-    e_ref, scale = rec.record(state), _energy_scale(model, state, rec)
+    e0 = rec.energies(state)
+    e_ref, scale = rec.record(state, e0), _energy_scale(model, state, e0)
     driving = model.driving(state.t)
     check_every = max(1, min(int(record_every), 10))
     bar = _progress_bar(n_steps, progress)
@@ -240,8 +241,8 @@ def _warn_if_unstable(model, integrator, h):
         warnings.warn(msg, StabilityWarning, stacklevel=3)
 
 
-def _energy_scale(model, state, rec):
-    ke, pe, _ = rec.energies(state)
+def _energy_scale(model, state, energies):
+    ke, pe, _ = energies
     el = model.body_potential.energy(state.x)
     scale = max(abs(ke), abs(pe), abs(el) if math.isfinite(el) else 0.0)
     if model.loads:

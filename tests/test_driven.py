@@ -19,7 +19,7 @@ def test_twist_is_a_rigid_rotation_with_the_exact_velocity():
         # distances between points are kept (a rotation), points on the axis do not move
         d0 = np.linalg.norm(X[:, None] - X[None], axis=-1)
         d1 = np.linalg.norm(x[:, None] - x[None], axis=-1)
-        np.testing.assert_allclose(d1, d0, atol=1e-13)
+        np.testing.assert_allclose(d1, d0, atol=1e-13)  # round-off of a rotation of unit-size points
         # central difference: O(h^2) ~ 1e-12 m/s with h = 1e-6 s, plus round-off 1e-16/1e-6
         np.testing.assert_allclose(tw.velocity(X, t), _fd_velocity(tw, X, t), atol=1e-8)
     on_axis = np.array([[0.5, 0.5, 0.5], [1.5, 1.5, 0.5]])

@@ -61,7 +61,7 @@ def test_cube_crushed_to_a_fifth_and_released():
     np.testing.assert_allclose(crushed, -0.08, atol=1e-12)  # held at 20 % of the height
     _check(model, run, t_free=release)
     # it springs back towards its rest height once released
-    assert run.displacement[-1][top, 2].min() > -0.01
+    assert run.displacement[-1][top, 2].min() > -0.01  # back within 1/8 of the 8 cm crush
 
 
 def test_beam_twisted_a_full_turn():
@@ -76,4 +76,5 @@ def test_beam_twisted_a_full_turn():
     np.testing.assert_allclose(run.displacement[i][end], 0.0, atol=1e-12)
     # while the middle of the beam is turned by about 180 degrees
     mid = np.isclose(model.mesh.p[0], 0.5) & np.isclose(model.mesh.p[2], 0.1)
+    # turned by ~180 degrees, the top edge of the 0.1 m section moves down by ~0.1 m
     assert run.displacement[i][mid, 2].max() < -0.05

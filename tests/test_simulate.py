@@ -63,11 +63,13 @@ def test_linearized_implicit_euler_with_corotated_uses_stiffness_warping():
         a = fe.simulate(model, li, dt, t_end=0.2)
         b = fe.simulate(model, fe.ImplicitEuler(), dt, t_end=0.2)
         diffs.append(np.abs(a.displacement[-1] - b.displacement[-1]).max())
-    assert li._warper[1] is not None  # the warped stiffness was used
+    assert "warped_stiffness" in vars(model)  # the model's warped stiffness was built and used
     assert (li.last_stats.newton_iterations, li.last_stats.dt_cuts) == (1, 0)
     # halving dt at least halves the gap (O(h) globally, measured ratio ~ 3)
     assert diffs[1] < 0.6 * diffs[0], diffs
-    assert diffs[1] < 0.05 * np.abs(b.displacement[-1]).max()
+    # measured 0.19 % of the displacement at h = 0.01 s (0.39 % at 0.02 s: O(h)); the bound,
+    # 1 %, is that linearization error with a factor 5 for other meshes and machines
+    assert diffs[1] < 0.01 * np.abs(b.displacement[-1]).max()
 
 
 def test_mass_spring_body_simulates_and_its_dashpots_dissipate():
@@ -81,7 +83,9 @@ def test_mass_spring_body_simulates_and_its_dashpots_dissipate():
         for integ in (fe.SymplecticEuler(), fe.ImplicitEuler()):
             run = fe.simulate(model, integ, dt, steps=200, state=s0)
             totals[k_d, integ.name] = run.total
-    # dashpots only remove energy: the damped run ends lower than the undamped one
+    # dashpots only remove energy: the damped run ends lower than the undamped one, by more
+    # than the schemes' own differences (implicit Euler's numerical damping, symplectic
+    # Euler's O(omega h) energy swing, both a few % here)
     for name in ("SymplecticEuler", "ImplicitEuler"):
         assert totals[10.0, name][-1] < 0.8 * totals[0.0, name][-1]
     assert np.all(np.diff(totals[10.0, "ImplicitEuler"]) <= 1e-9 * totals[10.0, "ImplicitEuler"][0])

@@ -243,7 +243,8 @@ def test_two_masses_on_a_spring_oscillate_at_the_closed_form_frequency():
 VOIGT = [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]
 
 
-def uniaxial_moduli(pot, X, volume):
+def compliance(pot, X, volume):
+    """S = C^-1 (1/Pa, Voigt, engineering shears) from the Hessian under the six homogeneous strains."""
     Xp = X.reshape(-1, 3)
     U = []
     for a, b in VOIGT:
@@ -251,8 +252,11 @@ def uniaxial_moduli(pot, X, volume):
         eps[a, b] = eps[b, a] = 1.0 if a == b else 0.5
         U.append((Xp @ eps.T).ravel())
     U = np.array(U).T
-    C = U.T @ (pot.hessian(X) @ U) / volume
-    S = np.linalg.inv(C)
+    return np.linalg.inv(U.T @ (pot.hessian(X) @ U) / volume)
+
+
+def uniaxial_moduli(pot, X, volume):
+    S = compliance(pot, X, volume)
     return 1.0 / S[0, 0], -S[0, 1] / S[0, 0], -S[0, 2] / S[0, 0]
 
 
@@ -489,15 +493,7 @@ def test_van_gelder_network_is_anisotropic_as_documented():
     the face diagonal (1, 1, 0), 3/8 along (1, -1, 0). Tolerance: round-off of a 6x6 inverse.
     """
     space = Discretization(fe.beam_mesh(2.0, 1.0, 1.0, cells=(4, 2, 2)), 1)
-    pot = MassSpring(E=1.0).build(space)
-    Xp = space.X.reshape(-1, 3)
-    U = []
-    for a, b in VOIGT:
-        eps = np.zeros((3, 3))
-        eps[a, b] = eps[b, a] = 1.0 if a == b else 0.5
-        U.append((Xp @ eps.T).ravel())
-    U = np.array(U).T
-    S = np.linalg.inv(U.T @ (pot.hessian(space.X) @ U) / 2.0)  # block volume 2 m^3
+    S = compliance(MassSpring(E=1.0).build(space), space.X, 2.0)  # block volume 2 m^3
 
     def modulus(n):
         n = np.asarray(n, float) / np.linalg.norm(n)

@@ -26,7 +26,9 @@ import time
 import numpy as np
 
 from ..errors import Diverged, InvalidParameter
-from ..newton import _direction, newton_minimize
+from ..linear_solvers import AutoSolver
+from ..materials import Corotated
+from ..newton import NewtonResult, _direction, newton_minimize
 from ..state import State
 from .base import Integrator, StepStats, check_dt, check_state
 from .incremental import IncrementalPotential
@@ -113,8 +115,8 @@ class ImplicitEuler(_Implicit):
     rtol : float
         Newton stops when the out-of-balance force of G on the free DOFs is
         below ``rtol`` times the step's force scale (the larger of the
-        momentum flux ``||M v_n|| / h``, the external load and the elastic
-        force at the first guess), or at the round-off floor of G (the
+        momentum flux ``||M v_n|| / h``, the external load and the
+        out-of-balance force at the first guess), or at the round-off floor of G (the
         body's, plus the inertia term's ``eps ||m |x| || / h^2``).
     max_iter : int
         Most Newton iterations per (sub-)step.
@@ -176,7 +178,7 @@ class ImplicitEuler(_Implicit):
             gradient=counted.gradient, g_floor=G.gradient_roundoff(x0), **self._solver_settings(model),
         )
         stats.newton_iterations += res.iterations
-        stats.gradient_evaluations += counted.calls + 1  # + the elastic force in G.scale
+        stats.gradient_evaluations += counted.calls
         stats.line_search_cuts += res.line_search_cuts
         stats.linear_iterations += res.linear_iterations
         for k, v in res.seconds.items():
@@ -233,19 +235,13 @@ class LinearizedImplicitEuler(_Implicit):
     def __init__(self, mass="lumped", project=True, warping=True, linear_solver=None):
         super().__init__(mass, 0, linear_solver)
         self.project, self.warping = bool(project), bool(warping)
-        self._warper = (None, None)
 
     def _warped(self, model):
+        """The model's warped stiffness if the scheme is stiffness warping, else None."""
         material = getattr(model.body_potential, "material", None)
-        from ..materials import Corotated
-
-        if not (self.warping and isinstance(material, Corotated)):
-            return None
-        if self._warper[0] is not model:
-            from ..stiffness_warping import WarpedStiffness
-
-            self._warper = (model, WarpedStiffness(model.space, material))
-        return self._warper[1]
+        if self.warping and isinstance(material, Corotated):
+            return model.warped_stiffness
+        return None
 
     def _try(self, model, state, h, stats):
         free, dofs, xc, vc = self._start(model, state, h)
@@ -253,28 +249,17 @@ class LinearizedImplicitEuler(_Implicit):
         x0 = state.x.copy()
         x0[dofs] = xc
         t0 = time.perf_counter()
-        warper = self._warped(model)
-        if warper is None:
-            body = None
-        else:  # warped elastic force and stiffness, plus every other term of the model
-            g, K = warper.linearize(x0)
-            for term in model.potentials[1:]:
-                gt, Ht = term.linearize(x0, project=self.project)
-                g = g + gt
-                if Ht is not None:
-                    K = K + Ht
-            body = (g, K)
-        g, H = G.linearize(x0, project=self.project, body=body)
+        # the model's terms, with the warped stiffness in place of the body's for stiffness warping
+        model_terms = model.linearize(x0, project=self.project, body=self._warped(model))
+        g, H = G.linearize(x0, project=self.project, body=model_terms)
         stats.seconds["linearize"] += time.perf_counter() - t0
         stats.gradient_evaluations += 1
         g = np.where(free, g, 0.0)
-        settings = self._solver_settings(model)
-        dx, _ = _direction(
-            self.linear_solver or _default_solver(), H, g, free, settings["pattern"],
-            settings["near_null"] * free[:, None], stats_proxy := _Seconds(),
-        )
-        stats.seconds["solve"] += stats_proxy.seconds["solve"]
-        stats.linear_iterations += stats_proxy.linear_iterations
+        solve = NewtonResult(x=x0, converged=False, iterations=1)  # collects the solve's figures
+        dx, _ = _direction(self.linear_solver or AutoSolver(), H, g, free, model.space.pattern,
+                           model.rigid_body_modes * free[:, None], solve)
+        stats.seconds["solve"] += solve.seconds["solve"]
+        stats.linear_iterations += solve.linear_iterations
         stats.newton_iterations += 1
         x1 = x0 + dx
         if not np.all(np.isfinite(x1)):
@@ -298,17 +283,3 @@ class _Counted:
     def linearize(self, x, project=True):
         self.calls += 1
         return self.G.linearize(x, project)
-
-
-class _Seconds:
-    """The two fields of a NewtonResult that ``newton._direction`` updates."""
-
-    def __init__(self):
-        self.seconds = {"solve": 0.0}
-        self.linear_iterations = 0
-
-
-def _default_solver():
-    from ..linear_solvers import AutoSolver
-
-    return AutoSolver()

@@ -100,7 +100,8 @@ class IncrementalPotential:
             return H + sp.diags(m, format="csr")
         M = self.model.mass_matrix
         if pattern.owns(H):
-            pos = _positions(pattern, M)
+            M.sort_indices()
+            pos = pattern.positions_of(M)
             if pos is not None:
                 H.data[pos] += M.data / self.k2
                 return H
@@ -110,14 +111,14 @@ class IncrementalPotential:
         """Force scale (N) for Newton's relative tolerance.
 
         The larger of the momentum flux ``||M v_n|| / h`` (the inertial force
-        of the step), the external load, and the elastic force at the start
-        of the step, on the free DOFs.
+        of the step) and the external load, on the free DOFs; Newton takes
+        the larger of this and its first residual (the out-of-balance force
+        of the first guess).
         """
         m = self.model
         parts = [
             np.linalg.norm(self._M(state.v)[free]) / np.sqrt(self.k2),
             np.linalg.norm(m.external_force()[free]),
-            np.linalg.norm(m.body_potential.gradient(state.x)[free]),
         ]
         return float(max(parts))
 
@@ -136,29 +137,3 @@ class IncrementalPotential:
         d = np.abs(x - self.y)
         inertia = _EPS * float(np.einsum("i,i,i->", self.model.lumped_mass, np.abs(x), d)) / self.k2
         return self.model.energy_roundoff() + inertia
-
-
-_POSITIONS = {}
-
-
-def _positions(pattern, A):
-    """Positions of the entries of CSR ``A`` in ``pattern``'s data (None if not a subset); cached."""
-    key = (id(pattern), id(A))
-    hit = _POSITIONS.get(key)
-    if hit is not None and hit[0] is pattern and hit[1] is A:
-        return hit[2]
-    n = pattern.shape[0]
-    ip = np.asarray(pattern.indptr, dtype=np.int64)
-    prow = np.repeat(np.arange(n, dtype=np.int64), np.diff(ip))
-    pkeys = prow * n + pattern.indices
-    A = A.tocsr()
-    A.sort_indices()
-    arow = np.repeat(np.arange(n, dtype=np.int64), np.diff(A.indptr))
-    akeys = arow * n + A.indices
-    pos = np.searchsorted(pkeys, akeys)
-    ok = pos < pkeys.size
-    ok[ok] = pkeys[pos[ok]] == akeys[ok]
-    pos = pos if ok.all() else None
-    _POSITIONS.clear()  # one cached map: a model's mass matrix
-    _POSITIONS[key] = (pattern, A, pos)
-    return pos
