@@ -2,6 +2,7 @@
 
 import logging
 import os
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import meshio
@@ -169,3 +170,72 @@ def test_shipped_meshes_load_and_validate(name, n_tets):
         z_bottom = mesh.p[2, mesh.facets[:, mesh.boundaries["bottom"]]]
         assert z_bottom.max() < 0.1 * mesh.p[2].max()
     assert (MESHES / f"{name}.vtu").stat().st_size < 300_000
+
+
+# --- VTU series: write_vtu_frame, write_pvd, read_series ---------------------------------
+
+
+def _write_tiny_series(run, n_frames=3):
+    """A 2-tet series with known arrays; returns (times, points_ref, tets, displacements)."""
+    from fem_elastic.io import write_pvd, write_vtu_frame
+
+    mesh = beam_mesh(cells=(1, 1, 1))
+    ref, tets = mesh.p.T, mesh.t.T
+    (run / "frames").mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(0)
+    times = np.array([0.0, 0.1, 0.30000000000000004])[:n_frames]  # not a short decimal
+    disps, entries = [], []
+    for i, t in enumerate(times):
+        u = 1e-3 * rng.standard_normal(ref.shape)
+        name = f"frames/frame_{i:06d}.vtu"
+        write_vtu_frame(run / name, ref + u, tets, {"displacement": u, "velocity": 2 * u},
+                        {"von_mises": np.full(len(tets), float(i)),
+                         "energy_density": np.arange(len(tets)) + t})
+        entries.append((t, name))
+        disps.append(u)
+        write_pvd(run / "series.pvd", entries)
+    return times, ref, tets, np.array(disps)
+
+
+def test_series_round_trip(tmp_path):
+    from fem_elastic.io import read_series
+
+    times, ref, tets, disps = _write_tiny_series(tmp_path)
+    series = read_series(tmp_path)
+    # float64 binary VTU and 17-digit PVD times: everything reads back bit for bit,
+    # except points_ref = (ref + u) - u, exact to one rounding of the coordinates.
+    np.testing.assert_array_equal(series.times, times)
+    np.testing.assert_array_equal(series.tets, tets)
+    np.testing.assert_array_equal(series.displacement, disps)
+    np.testing.assert_array_equal(series.velocity, 2 * disps)
+    np.testing.assert_allclose(series.points_ref, ref, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(series.cell_data["von_mises"][:, 0], [0.0, 1.0, 2.0])
+    assert series.cell_data["energy_density"].shape == (3, len(tets))
+    assert series.summary == {}
+    # ParaView reads the files: a VTKFile Collection, and VTU 1.0-style UnstructuredGrid.
+    root = ET.parse(tmp_path / "series.pvd").getroot()
+    assert root.tag == "VTKFile" and root.get("type") == "Collection"
+    assert meshio.read(tmp_path / "frames/frame_000001.vtu").points.shape == ref.shape
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["frames", "series.pvd"]  # no temp files
+
+
+def test_series_skips_missing_and_truncated_frames(tmp_path, caplog):
+    from fem_elastic.io import read_series
+
+    times, _, _, disps = _write_tiny_series(tmp_path)
+    (tmp_path / "frames/frame_000001.vtu").unlink()
+    truncated = tmp_path / "frames/frame_000002.vtu"
+    truncated.write_bytes(truncated.read_bytes()[:200])
+    with caplog.at_level(logging.WARNING, logger="fem_elastic.io"):
+        series = read_series(tmp_path)
+    np.testing.assert_array_equal(series.times, times[:1])
+    np.testing.assert_array_equal(series.displacement, disps[:1])
+    assert "frame_000001.vtu" in caplog.text and "missing" in caplog.text
+    assert "frame_000002.vtu" in caplog.text
+
+
+def test_read_series_without_pvd(tmp_path):
+    from fem_elastic.io import read_series
+
+    with pytest.raises(InvalidParameter, match="series.pvd"):
+        read_series(tmp_path)
