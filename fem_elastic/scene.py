@@ -1,0 +1,728 @@
+"""Scene files: a simulation described in TOML, checked, and built into runs.
+
+A scene file names a mesh, a body, its supports and loads, optionally a ground,
+damping, driven boundaries and an initial velocity, an integrator, a time step
+and duration, and what to write. :func:`load_scene` reads and checks one;
+:meth:`Scene.build` turns it into :class:`BuiltRun` objects (a
+:class:`fem_elastic.Model`, an integrator, ``dt``, the number of steps, the
+initial :class:`fem_elastic.State`) ready for :func:`fem_elastic.simulate`.
+A scene builds only the terms it declares: no gravity term without
+``[loads] gravity``, no contact without ``[ground]``, no damping without
+``[damping]``.
+
+Each ``[[compare]]`` table adds a *variant*: another run of the same scene
+with another body and/or integrator (a mass-spring copy beside an FEM body,
+say). :attr:`Scene.variants` lists their names, the main run's first.
+
+Every mistake in a file (TOML syntax, an unknown key, a wrong type, a missing
+key, a value out of range, a boundary the mesh does not have) raises
+:class:`SceneError`, which names the key, the file and the line, and suggests
+the near miss the user probably meant. The schema (tables, keys, types, units,
+defaults) lives in :mod:`fem_elastic.scene_schema`; :func:`scene_help` prints it.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python < 3.11
+    import tomli as tomllib
+
+from .errors import FemElasticError, InvalidParameter
+from .scene_schema import (
+    CALIBRATIONS,
+    MATERIALS,
+    Invalid,
+    closest,
+    format_path,
+    make_integrator,
+    schema_help,
+    split_path,
+    validate,
+)
+
+__all__ = ["BuiltRun", "Scene", "SceneError", "load_scene", "parse_scene", "scene_help"]
+
+
+# ---------------------------------------------------------------------------------------
+# the error
+
+
+class SceneError(InvalidParameter):
+    """A scene file is wrong: the message names the key, the file and the line.
+
+    ``str(error)`` reads like
+    ``scenes/x.toml, line 12: [body] unknown key "Young" — did you mean "E"? ...``.
+
+    Attributes
+    ----------
+    key : str or None
+        Dotted path of the offending key, e.g. ``"body.E"`` or
+        ``"compare[1].body.material"`` (array indices from 0); None for a
+        TOML syntax error.
+    line : int or None
+        1-based line in the file, None when it cannot be told (a missing table).
+    file : str or None
+        The file (or the ``source`` given to :func:`parse_scene`).
+    suggestion : str or None
+        The near-miss key or value the user probably meant.
+    message : str
+        The message without the place.
+    """
+
+    def __init__(self, message: str, *, key: str | None = None, line: int | None = None,
+                 file: str | None = None, suggestion: str | None = None):
+        self.message = message
+        self.key = key
+        self.line = line
+        self.file = file
+        self.suggestion = suggestion
+        place = ", ".join(p for p in (file, None if line is None else f"line {line}") if p)
+        super().__init__(f"{place}: {message}" if place else message)
+
+
+# ---------------------------------------------------------------------------------------
+# where each key is written: a small scanner of (valid) TOML text
+
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+
+
+class _KeyLines:
+    """Line of every table header, key and array element of a TOML text.
+
+    ``lines[path]`` with ``path`` a tuple of keys and array indices, as in
+    :class:`fem_elastic.scene_schema.Invalid`. Only run on text that tomllib
+    has parsed, so the scanner can trust the syntax.
+    """
+
+    def __init__(self, text: str):
+        self.text = text
+        self.n = len(text)
+        self.i = 0
+        self.newlines = [m.start() for m in re.finditer("\n", text)]
+        self.lines: dict[tuple, int] = {}
+        self.tables: dict[tuple, int] = {}  # array-of-tables path -> index of its last element
+        try:
+            self._document()
+        except (IndexError, ValueError):  # pragma: no cover - keep what was found
+            pass
+
+    def line(self, pos: int) -> int:
+        return bisect.bisect_left(self.newlines, pos) + 1
+
+    def _record(self, path: tuple, pos: int) -> None:
+        self.lines.setdefault(path, self.line(pos))
+
+    def _skip(self, newlines: bool) -> None:
+        t = self.text
+        while self.i < self.n:
+            c = t[self.i]
+            if c in " \t\r" or (newlines and c == "\n"):
+                self.i += 1
+            elif c == "#":
+                end = t.find("\n", self.i)
+                self.i = self.n if end < 0 else end
+            else:
+                break
+
+    def _string(self) -> str:
+        t, i = self.text, self.i
+        for quote in ('"""', "'''"):
+            if t.startswith(quote, i):
+                end = t.find(quote, i + 3)
+                while quote == '"""' and end > 0 and _escaped(t, end):
+                    end = t.find(quote, end + 1)
+                end += 3
+                while end < self.n and t[end] == quote[0]:  # up to two quotes end the content
+                    end += 1
+                self.i = end
+                return t[i + 3:end - 3]
+        q = t[i]
+        j = i + 1
+        while t[j] != q or (q == '"' and _escaped(t, j)):
+            j += 1
+        self.i = j + 1
+        raw = t[i + 1:j]
+        if q == '"':
+            try:
+                raw = tomllib.loads(f"k = {t[i:j + 1]}")["k"]
+            except tomllib.TOMLDecodeError:  # pragma: no cover
+                pass
+        return raw
+
+    def _key(self) -> tuple:
+        parts = []
+        while True:
+            self._skip(False)
+            c = self.text[self.i]
+            if c in "\"'":
+                parts.append(self._string())
+            else:
+                m = _BARE_KEY.match(self.text, self.i)
+                parts.append(m.group())
+                self.i = m.end()
+            self._skip(False)
+            if self.i < self.n and self.text[self.i] == ".":
+                self.i += 1
+                continue
+            return tuple(parts)
+
+    def _resolve(self, keys: tuple) -> tuple:
+        path: tuple = ()
+        for k in keys:
+            path += (k,)
+            if path in self.tables:
+                path += (self.tables[path],)
+        return path
+
+    def _document(self) -> None:
+        t = self.text
+        current: tuple = ()
+        while True:
+            self._skip(True)
+            if self.i >= self.n:
+                return
+            start = self.i
+            if t.startswith("[[", self.i):
+                self.i += 2
+                keys = self._key()
+                self.i += 2  # "]]"
+                parent = self._resolve(keys[:-1])
+                path = parent + (keys[-1],)
+                index = self.tables.get(path, -1) + 1
+                self.tables[path] = index
+                current = path + (index,)
+                self._record(path, start)
+                self._record(current, start)
+            elif t[self.i] == "[":
+                self.i += 1
+                keys = self._key()
+                self.i += 1  # "]"
+                current = self._resolve(keys)
+                for k in range(1, len(current) + 1):
+                    self._record(current[:k], start)
+            else:
+                self._pair(current)
+
+    def _pair(self, table: tuple) -> None:
+        start = self.i
+        keys = self._key()
+        self._skip(False)
+        self.i += 1  # "="
+        for k in range(1, len(keys) + 1):
+            self._record(table + keys[:k], start)
+        self._value(table + keys)
+
+    def _value(self, path: tuple) -> None:
+        self._skip(False)
+        t = self.text
+        c = t[self.i]
+        if c in "\"'":
+            self._string()
+        elif c == "[":
+            self.i += 1
+            index = 0
+            while True:
+                self._skip(True)
+                if t[self.i] == "]":
+                    self.i += 1
+                    return
+                self._record(path + (index,), self.i)
+                self._value(path + (index,))
+                self._skip(True)
+                if t[self.i] == ",":
+                    self.i += 1
+                    index += 1
+        elif c == "{":
+            self.i += 1
+            while True:
+                self._skip(False)
+                if t[self.i] == "}":
+                    self.i += 1
+                    return
+                self._pair(path)
+                self._skip(False)
+                if t[self.i] == ",":
+                    self.i += 1
+        else:  # number, boolean, date: up to the next delimiter
+            while self.i < self.n and t[self.i] not in ",]}\n#":
+                self.i += 1
+
+
+def _escaped(text: str, pos: int) -> bool:
+    """Whether the character at ``pos`` is escaped by an odd number of backslashes."""
+    n = 0
+    while pos - 1 - n >= 0 and text[pos - 1 - n] == "\\":
+        n += 1
+    return n % 2 == 1
+
+
+# ---------------------------------------------------------------------------------------
+# reading
+
+
+def _syntax_error(exc: Exception, text: str, source: str) -> SceneError:
+    msg = str(exc)
+    m = re.search(r"\(at line (\d+), column (\d+)\)", msg)
+    line = None
+    if m:
+        line = int(m.group(1))
+        msg = msg[:m.start()].rstrip() + f" (column {m.group(2)})"
+    elif "end of document" in msg:
+        line = text.count("\n") + (0 if text.endswith("\n") else 1)
+        msg = msg.replace("(at end of document)", "at the end of the file").strip()
+    return SceneError(
+        f"TOML syntax error: {msg}. Check the quotes, brackets and '=' there "
+        "(strings need quotes, arrays [ ], tables { } on one line).",
+        line=line, file=source,
+    )
+
+
+def parse_scene(text: str, *, source: str = "<string>", base_dir=".") -> "Scene":
+    """Check a scene given as TOML text and return it as a :class:`Scene`.
+
+    Parameters
+    ----------
+    text : str
+        The scene file's content.
+    source : str
+        Where it came from, for messages (a file name).
+    base_dir : str or os.PathLike
+        Folder that ``[mesh] path`` is relative to (the scene file's folder).
+
+    Returns
+    -------
+    Scene
+
+    Raises
+    ------
+    SceneError
+        The text is not TOML, or it breaks the schema (see :func:`scene_help`).
+
+    Examples
+    --------
+    >>> from fem_elastic.scene import SceneError, parse_scene
+    >>> scene = parse_scene('''
+    ... [mesh]
+    ... kind = "beam"
+    ... cells = [4, 1, 1]
+    ... [body]
+    ... material = "neo_hookean"
+    ... E = 1e6
+    ... nu = 0.3
+    ... density = 1000.0
+    ... [boundary]
+    ... fixed = ["left"]
+    ... [integrator]
+    ... type = "implicit_euler"
+    ... [time]
+    ... dt = 0.01
+    ... duration = 0.05
+    ... ''', source="tiny.toml")
+    >>> scene.name, scene.variants, scene.spec["output"]["render"]
+    ('tiny', ['fem'], ['mp4'])
+    >>> run = scene.build()[0]
+    >>> run.steps, run.model.loads, run.model.obstacles   # nothing it did not declare
+    (5, (), ())
+    >>> try:
+    ...     parse_scene('[mesh]\\nkind = "beem"\\n', source="bad.toml")
+    ... except SceneError as err:
+    ...     print(err.key, err.line, err.suggestion)
+    mesh.kind 2 beam
+    """
+    try:
+        document = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise _syntax_error(exc, text, source) from None
+    locations = _KeyLines(text).lines
+    try:
+        spec = validate(document)
+    except Invalid as exc:
+        raise _located(exc, locations, source) from None
+    if spec["scene"]["name"] is None:
+        stem = Path(source).stem if source and not source.startswith("<") else "scene"
+        spec["scene"]["name"] = stem
+    variants = [spec["body"]["name"]] + [c["name"] for c in spec["compare"]]
+    return Scene(
+        name=spec["scene"]["name"],
+        description=spec["scene"]["description"],
+        source=source,
+        spec=spec,
+        variants=variants,
+        base_dir=Path(base_dir),
+        locations=locations,
+    )
+
+
+def load_scene(path) -> "Scene":
+    """Read and check a scene file (see :func:`parse_scene`).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.toml`` file; ``[mesh] path`` is relative to its folder.
+
+    Raises
+    ------
+    SceneError
+        The file is unreadable, not TOML, or breaks the schema.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SceneError(f"scene file {str(path)!r} not found; check the path.", file=str(path)) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"cannot read the scene file: {exc}.", file=str(path)) from None
+    return parse_scene(text, source=str(path), base_dir=path.parent)
+
+
+def _line_of(path: tuple, locations: dict) -> int | None:
+    """Line of ``path``, else of the nearest enclosing table or key that is written."""
+    p = tuple(path)
+    while p:
+        if p in locations:
+            return locations[p]
+        p = p[:-1]
+    return None
+
+
+def _located(exc: Invalid, locations: dict, source: str) -> SceneError:
+    table, _ = split_path(exc.path)
+    # a missing key is reported at its table's header; an element at its array's key
+    prefix = f"[{format_path(table)}] " if table and not exc.message.startswith("[") else ""
+    return SceneError(
+        prefix + exc.message,
+        key=format_path(exc.path) or None,
+        line=_line_of(exc.path, locations),
+        file=source,
+        suggestion=exc.suggestion,
+    )
+
+
+def scene_help() -> str:
+    """The scene-file reference (tables, keys, types, units, defaults, allowed values).
+
+    Generated from the schema that :func:`parse_scene` checks against, so it
+    is always current. ``fem-elastic run --help`` prints it.
+
+    Examples
+    --------
+    >>> print(scene_help().splitlines()[0])
+    Scene files are TOML. Units are SI (m, s, kg, Pa, N); angles are in degrees.
+    """
+    return schema_help()
+
+
+# ---------------------------------------------------------------------------------------
+# the scene and its runs
+
+
+@dataclass(frozen=True)
+class BuiltRun:
+    """One run of a scene, ready for :func:`fem_elastic.simulate`.
+
+    Attributes
+    ----------
+    name : str
+        The variant's name.
+    model : Model
+    integrator : Integrator
+        A fresh instance (integrators may keep per-run state).
+    dt : float
+        Time step (s).
+    steps : int
+        ``ceil(duration / dt)``.
+    state : State
+        Initial state.
+    record_every : int
+        Record a frame every this many steps.
+    output : dict
+        ``vtu`` (bool), ``render`` (list of "mp4", "gif", "png"),
+        ``color_by`` ("von_mises" | "displacement"), ``size`` ((width, height) px),
+        ``fps`` (frames/s).
+    info : dict
+        Plain values describing the run, for ``summary.json``.
+    """
+
+    name: str
+    model: object
+    integrator: object
+    dt: float
+    steps: int
+    state: object
+    record_every: int
+    output: dict
+    info: dict
+
+    def simulate(self, **options):
+        """Run it through :func:`fem_elastic.simulate`.
+
+        Parameters
+        ----------
+        **options
+            Passed on to :func:`fem_elastic.simulate` (``progress``,
+            ``callback``, ``check_stability``, ...); the model, integrator,
+            ``dt``, ``steps``, initial ``state`` and ``record_every`` are this run's.
+
+        Returns
+        -------
+        Trajectory
+        """
+        from .simulate import simulate
+
+        return simulate(self.model, self.integrator, self.dt, steps=self.steps, state=self.state,
+                        record_every=self.record_every, **options)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A checked scene file (see :func:`parse_scene`, :func:`load_scene`).
+
+    Attributes
+    ----------
+    name, description : str
+    source : str
+        The file it was read from (or the ``source`` given to :func:`parse_scene`).
+    spec : dict
+        The validated document with every default filled in.
+    variants : list of str
+        Run names: the main body's first, then each ``[[compare]]``'s.
+    base_dir : pathlib.Path
+        Folder ``[mesh] path`` is relative to.
+    locations : dict
+        1-based line of each table and key in the source, by path
+        (``("compare", 0, "body", "E")``), for messages about the scene.
+    """
+
+    name: str
+    description: str
+    source: str
+    spec: dict = field(repr=False)
+    variants: list = field(default_factory=list)
+    base_dir: Path = Path(".")
+    locations: dict = field(default_factory=dict, repr=False, compare=False)
+
+    # errors at build time, placed in the file ---------------------------------------
+    def _error(self, path: tuple, message: str, suggestion: str | None = None) -> SceneError:
+        return _located(Invalid(path, message, suggestion), self.locations, self.source)
+
+    def _guard(self, path: tuple, make, *args, **kwargs):
+        """``make(*args, **kwargs)``, with a library InvalidParameter placed at ``path``."""
+        try:
+            return make(*args, **kwargs)
+        except SceneError:
+            raise
+        except (InvalidParameter, FemElasticError) as exc:
+            raise self._error(path, str(exc)) from None
+
+    # building --------------------------------------------------------------------
+    def build(self, variants=None) -> list[BuiltRun]:
+        """Build the runs: one :class:`BuiltRun` per variant.
+
+        Parameters
+        ----------
+        variants : sequence of str or None
+            Names from :attr:`variants`; None builds all, in order.
+
+        Returns
+        -------
+        list of BuiltRun
+
+        Raises
+        ------
+        SceneError
+            A boundary the mesh does not have, a mesh file that cannot be
+            read, a vertex index out of range, or an unknown variant name.
+        """
+        names = list(self.variants) if variants is None else list(variants)
+        for name in names:
+            if name not in self.variants:
+                near = closest(name, self.variants)
+                hint = f' — did you mean "{near}"?' if near else "."
+                raise SceneError(f'the scene has no run "{name}"{hint} Its runs: '
+                                 f'{", ".join(self.variants)}.', key="variants", file=self.source,
+                                 suggestion=near)
+        mesh, mesh_info = self._mesh()
+        self._check_boundaries(mesh)
+        return [self._run(name, mesh, mesh_info) for name in names]
+
+    def _mesh(self):
+        m = self.spec["mesh"]
+        from .mesh import beam_mesh
+
+        if m["kind"] == "beam":
+            mesh = self._guard(("mesh",), beam_mesh, m["length"], m["width"], m["height"], tuple(m["cells"]))
+            info = {"kind": "beam", "length": m["length"], "width": m["width"], "height": m["height"],
+                    "cells": list(m["cells"])}
+        else:
+            path = Path(m["path"])
+            full = path if path.is_absolute() else self.base_dir / path
+            if not full.is_file():
+                raise self._error(("mesh", "path"), f'mesh file "{m["path"]}" not found (looked for '
+                                  f"{full}; the path is relative to the scene file's folder).")
+            from .io import load_mesh
+
+            try:
+                mesh = load_mesh(full, reorient=m["reorient"])
+            except Exception as exc:  # any reader failure is a problem of this file
+                fix = " Try reorient = true." if "invert" in str(exc).lower() and not m["reorient"] else ""
+                raise self._error(("mesh", "path"), f"cannot use the mesh file {full}: {exc}{fix}") from None
+            info = {"kind": "file", "path": str(m["path"]), "reorient": m["reorient"]}
+        if m["translate"] is not None:
+            mesh = mesh.translated(tuple(m["translate"]))
+            info["translate"] = list(m["translate"])
+        info["n_vertices"], info["n_tets"] = int(mesh.p.shape[1]), int(mesh.t.shape[1])
+        info["boundaries"] = sorted(mesh.boundaries or {})
+        return mesh, info
+
+    def _check_boundaries(self, mesh) -> None:
+        names = sorted(mesh.boundaries or {})
+        known = ", ".join(f'"{n}"' for n in names) or "none (fix vertices by index instead)"
+
+        def check(name, path):
+            if name not in names:
+                near = closest(name, names)
+                hint = f' — did you mean "{near}"?' if near else "."
+                raise self._error(path, f'the mesh has no boundary "{name}"{hint} Its boundaries: '
+                                        f"{known}.", near)
+
+        fixed = self.spec["boundary"]["fixed"]
+        nv = mesh.p.shape[1]
+        for i, f in enumerate(fixed):
+            if isinstance(f, str):
+                check(f, ("boundary", "fixed", i))
+            elif f >= nv:
+                raise self._error(("boundary", "fixed", i), f"fixed vertex index {f} is out of range: "
+                                  f"the mesh has {nv} vertices (0 to {nv - 1}).")
+        for name in self.spec["loads"]["traction"]:
+            check(name, ("loads", "traction", name))
+        for i, d in enumerate(self.spec["loads"]["driven"]):
+            check(d["boundary"], ("loads", "driven", i, "boundary"))
+
+    def _variant(self, name: str):
+        """(body spec, its path, integrator spec, its path) of a variant."""
+        spec = self.spec
+        if name == spec["body"]["name"]:
+            return spec["body"], ("body",), spec["integrator"], ("integrator",)
+        for i, c in enumerate(spec["compare"]):
+            if c["name"] == name:
+                body, bpath = (c["body"], ("compare", i, "body")) if c["body"] else (spec["body"], ("body",))
+                integ, ipath = ((c["integrator"], ("compare", i, "integrator")) if c["integrator"]
+                                else (spec["integrator"], ("integrator",)))
+                return body, bpath, integ, ipath
+        raise KeyError(name)  # pragma: no cover - names are checked in build()
+
+    def _body(self, body: dict, path: tuple):
+        if body["type"] == "fem":
+            from .elastic_body import ElasticBody
+
+            material = self._guard(path, MATERIALS[body["material"]], E=body["E"], nu=body["nu"])
+            return self._guard(path + ("order",), ElasticBody, material, order=body["order"])
+        from .springs import MassSpring
+
+        return self._guard(path, MassSpring, E=body["E"], nu=body["nu"],
+                           calibration=CALIBRATIONS[body["calibration"]], k_d=body["k_d"])
+
+    def _terms(self):
+        """Model keywords for the loads, ground, damping and driven boundaries that are declared."""
+        from .contact import Ground
+        from .damping import Rayleigh
+        from .driven import Translate, Twist
+
+        spec, terms = self.spec, {}
+        loads = spec["loads"]
+        if spec["boundary"]["fixed"]:
+            terms["fixed"] = spec["boundary"]["fixed"]
+        if loads["gravity"] is not None:
+            terms["gravity"] = tuple(loads["gravity"])
+        if loads["traction"]:
+            terms["traction"] = {k: tuple(v) for k, v in loads["traction"].items()}
+        if loads["driven"]:
+            driven = {}
+            for i, d in enumerate(loads["driven"]):
+                path = ("loads", "driven", i)
+                if d["boundary"] in driven:
+                    raise self._error(path + ("boundary",), f'boundary "{d["boundary"]}" is driven '
+                                      "twice; give each boundary one motion.")
+                if d["motion"] == "twist":
+                    driven[d["boundary"]] = self._guard(
+                        path, Twist, math.radians(d["angle"]), d["duration"], axis=tuple(d["axis"]),
+                        center=None if d["center"] is None else tuple(d["center"]), release=d["release"])
+                else:
+                    driven[d["boundary"]] = self._guard(
+                        path, Translate, tuple(d["offset"]), d["duration"], release=d["release"])
+            terms["driven"] = driven
+        g = spec["ground"]
+        if g is not None:
+            options = {k: v for k, v in g.items() if k not in ("z",) and v is not None}
+            terms["ground"] = self._guard(("ground",), Ground, z=g["z"], **options)
+        d = spec["damping"]
+        if d is not None:
+            terms["damping"] = self._guard(("damping",), Rayleigh, d["alpha"], d["beta"])
+        return terms
+
+    def _run(self, name: str, mesh, mesh_info: dict) -> BuiltRun:
+        from .model import Model
+        from .state import State
+
+        spec = self.spec
+        body, bpath, integ, ipath = self._variant(name)
+        model = self._guard(bpath, Model, mesh, body["density"], self._body(body, bpath), **self._terms())
+        integrator = self._guard(ipath, make_integrator, integ)
+        dt, duration = spec["time"]["dt"], spec["time"]["duration"]
+        # 1e-9: duration / dt in floating point may land a hair above an integer
+        steps = max(1, math.ceil(duration / dt - 1e-9))
+        initial = spec["initial"]
+        state = State.rest(model) if initial is None else self._guard(
+            ("initial", "velocity"), State.rest, model, velocity=tuple(initial["velocity"]))
+        out = spec["output"]
+        output = {"vtu": out["vtu"], "render": list(out["render"]), "color_by": out["color_by"],
+                  "size": tuple(out["size"]), "fps": out["fps"]}
+        return BuiltRun(
+            name=name, model=model, integrator=integrator, dt=dt, steps=steps, state=state,
+            record_every=out["every"], output=output,
+            info=self._info(name, body, integ, integrator, mesh_info, steps),
+        )
+
+    def _info(self, name, body, integ, integrator, mesh_info, steps) -> dict:
+        spec = self.spec
+        if body["type"] == "fem":
+            described = f'{MATERIALS[body["material"]].__name__} FEM, P{body["order"]} tets'
+            body_info = {"type": "fem", "material": body["material"], "order": body["order"]}
+        else:
+            described = f'mass-spring ({body["calibration"]} calibration)'
+            body_info = {"type": "springs", "calibration": body["calibration"], "k_d": body["k_d"],
+                         "order": 1}
+        body_info.update({"E": body["E"], "nu": body["nu"], "density": body["density"]})
+        g = spec["ground"]
+        d = spec["damping"]
+        return {
+            "scene": self.name,
+            "description": self.description,
+            "variant": name,
+            "body": described,
+            **body_info,
+            "body_spec": dict(body),
+            "mesh": dict(mesh_info),
+            "n_vertices": mesh_info["n_vertices"],
+            "n_tets": mesh_info["n_tets"],
+            "fixed": list(spec["boundary"]["fixed"]),
+            "gravity": None if spec["loads"]["gravity"] is None else list(spec["loads"]["gravity"]),
+            "traction": {k: list(v) for k, v in spec["loads"]["traction"].items()},
+            "driven": [dict(x) for x in spec["loads"]["driven"]],
+            "ground": None if g is None else {"kind": "plane", "z": g["z"], "method": g["method"]},
+            "damping": None if d is None else {"alpha": d["alpha"], "beta": d["beta"]},
+            "initial_velocity": None if spec["initial"] is None else list(spec["initial"]["velocity"]),
+            "integrator": integrator.name,
+            "integrator_options": {k: v for k, v in integ.items() if k != "type"},
+            "dt": spec["time"]["dt"],
+            "duration": spec["time"]["duration"],
+            "steps": steps,
+        }
