@@ -37,7 +37,8 @@ from .errors import (
     NotConverged,
     UnderConstrained,
 )
-from .io import load_mesh, save_mesh
+from .fields import CellFields, cell_fields, von_mises
+from .io import SeriesData, load_mesh, read_series, save_mesh, write_pvd, write_vtu_frame
 from .linear_solvers import AMGSolver, AutoSolver, DirectSolver, LinearSolverFailed, SingularMatrix
 from .materials import (
     Corotated,
@@ -59,7 +60,9 @@ from .mesh import (
     validate_mesh,
 )
 from .model import Model
+from .output import SeriesWriter, write_summary
 from .potential import LinearPotential, Potential
+from .scene import BuiltRun, Scene, SceneError, load_scene, parse_scene, scene_help
 from .simulate import StabilityWarning, simulate
 from .springs import MassSpring, SpringPotential, lloyd_stiffness, van_gelder_stiffness
 from .state import State
@@ -70,6 +73,9 @@ from .trajectory import Trajectory
 __version__ = "0.1.0"
 
 __all__ = [
+    "CellFields", "cell_fields", "von_mises", "SeriesData", "read_series", "write_pvd", "write_vtu_frame",
+    "SeriesWriter", "write_summary",
+    "BuiltRun", "Scene", "SceneError", "load_scene", "parse_scene", "scene_help",
     "critical_time_step", "max_frequency", "natural_frequencies", "WarpedStiffness",
     "MassSpring", "SpringPotential", "lloyd_stiffness", "van_gelder_stiffness",
     "Box", "Ground", "Obstacle", "Sphere",
