@@ -1,75 +1,45 @@
 """The ``fem-elastic`` command.
 
-``fem-elastic demo`` solves the default cantilever statically with every
-material and prints the tip deflection against Euler-Bernoulli and
-Timoshenko beam theory, with the run time of each.
+Subcommands::
+
+    fem-elastic demo [--out DIR]                 the default scene: a cantilever released
+                                                 under gravity, Neo-Hookean FEM beside a
+                                                 mass-spring copy, rendered to MP4/PNG/VTU
+    fem-elastic run SCENE.toml --out DIR         run a scene file
+    fem-elastic render DIR --format mp4|gif|png  render a run's VTU series
+    fem-elastic info MESH                        counts, quality and boundaries of a mesh
+    fem-elastic study accuracy|stability --out DIR [--quick]
+
+Every error the user can fix (a bad scene file, a bad option, a mesh that
+fails validation) is printed as one message without a traceback and gives a
+non-zero exit status: 2 for command-line and scene errors, 1 for a run that
+failed (diverged), 130 for Ctrl-C.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import sys
 import time
+from pathlib import Path
 
 __all__ = ["main"]
 
+_EXIT_USAGE, _EXIT_FAILED, _EXIT_INTERRUPTED = 2, 1, 130
 
-def _demo(args) -> int:
-    import numpy as np
 
-    import fem_elastic as fe
+class _Out:
+    """Prints for the command (library code logs; only the command prints)."""
 
-    L, b, h = args.length, 0.1, 0.1
-    E, nu, rho = args.E, 0.3, 1000.0
-    traction = -args.traction  # Pa, downwards (-z) on the free end
-    P = abs(traction) * b * h
-    beam = fe.RectangularCantilever(length=L, width=b, height=h, E=E, nu=nu)
-    eb, timo = beam.tip_load_euler_bernoulli(P), beam.tip_load_timoshenko(P)
-    t0 = time.perf_counter()
-    mesh = fe.beam_mesh(length=L, width=b, height=h, cells=tuple(args.cells))
-    t_mesh = time.perf_counter() - t0
-    tip = mesh.p[0] > L * (1 - 1e-9)
-    out = sys.stdout
-    out.write(
-        f"fem-elastic demo: a cantilever {L:g} m long, {b:g} m x {h:g} m, clamped at x = 0,\n"
-        f"E = {E:.3g} Pa, nu = {nu}, a tip load P = {P:.4g} N (traction {traction:.4g} Pa on the free end)\n"
-        f"mesh: {mesh.t.shape[1]} tets ({args.cells[0]} x {args.cells[1]} x {args.cells[2]} cells, "
-        f"built in {t_mesh:.2f} s), P{args.order} elements\n"
-        f"beam theory: Euler-Bernoulli {eb * 1e3:.4f} mm, Timoshenko {timo * 1e3:.4f} mm\n\n"
-    )
-    header = f"{'material':<18}{'tip (mm)':>12}{'vs EB':>10}{'vs Timo':>10}{'Newton':>8}{'time (s)':>10}\n"
-    out.write(header)
-    out.write("-" * (len(header) - 1) + "\n")
-    materials = [fe.LinearElastic, fe.StVK, fe.NeoHookean, fe.StableNeoHookean, fe.Corotated]
-    for Mat in materials:
-        t0 = time.perf_counter()
-        model = fe.Model(
-            mesh,
-            density=rho,
-            body=fe.ElasticBody(Mat(E=E, nu=nu), order=args.order),
-            fixed="left",
-            traction={"right": (0.0, 0.0, traction)},
-        )
-        res = fe.solve_static(model)
-        dt = time.perf_counter() - t0
-        w = -float(np.mean(res.displacement[tip, 2]))
-        out.write(
-            f"{Mat.__name__:<18}{w * 1e3:>12.4f}{w / eb - 1:>+10.2%}{w / timo - 1:>+10.2%}"
-            f"{res.iterations:>8d}{dt:>10.3f}\n"
-        )
-    if args.order == 2:
-        out.write(
-            "\nQuadratic tets land within a few percent of beam theory; the 3-D clamp, which also\n"
-            "stops the Poisson contraction at the wall, makes the solid a little stiffer than\n"
-            "Timoshenko's beam. Compare --order 1: linear tets lock in bending.\n"
-        )
-    else:
-        out.write(
-            "\nLinear tets lock in bending: with few elements through the thickness they are far\n"
-            "stiffer than the beam. Refine (--cells 80 8 8) and the error falls, or use --order 2.\n"
-        )
-    return 0
+    def __init__(self, quiet: bool):
+        self.quiet = quiet
+
+    def __call__(self, text: str = "") -> None:
+        if not self.quiet:
+            sys.stdout.write(text + "\n")
+            sys.stdout.flush()
 
 
 def _positive_float(text: str) -> float:
@@ -82,34 +52,406 @@ def _positive_float(text: str) -> float:
     return v
 
 
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
+    return v
+
+
+# ---------------------------------------------------------------------------------- run / demo
+
+
+def _tip_vertices(mesh, length: float):
+    import numpy as np
+
+    return np.flatnonzero(mesh.p[0] > length * (1.0 - 1e-9))
+
+
+def _print_outcomes(out, outcomes, rendered, out_dir) -> None:
+    out("")
+    out(f"{'variant':<12}{'status':<12}{'steps':>7}{'frames':>8}{'simulate (s)':>14}{'output (s)':>12}")
+    for o in outcomes:
+        traj = o.trajectory
+        steps = traj.steps if traj is not None else 0
+        frames = traj.times.size if traj is not None else 0
+        out(f"{o.name:<12}{o.status:<12}{steps:>7d}{frames:>8d}{o.seconds_simulate:>14.2f}{o.seconds_output:>12.2f}")
+    for o in outcomes:
+        if o.status != "completed":
+            out(f"{o.name}: {o.message}")
+    out("")
+    out(f"written to {out_dir}/:")
+    for o in outcomes:
+        out(f"  {o.run_dir.name}/series.pvd   (VTU series: open in ParaView), {o.run_dir.name}/summary.json")
+    for p in _collapse_pngs(rendered, out_dir):
+        out(f"  {p}")
+
+
+def _collapse_pngs(paths, out_dir):
+    """List movies one by one and PNG frames as one line per directory."""
+    pngs: dict = {}
+    lines = []
+    for p in paths:
+        p = Path(p)
+        if p.suffix == ".png":
+            pngs.setdefault(p.parent, []).append(p)
+        else:
+            lines.append(str(p.relative_to(out_dir)) if p.is_relative_to(out_dir) else str(p))
+    for d, files in pngs.items():
+        rel = d.relative_to(out_dir) if d.is_relative_to(out_dir) else d
+        lines.append(f"{rel}/ ({len(files)} PNG frames)")
+    return lines
+
+
+def _run_scene_command(scene, args, out) -> int:
+    from .runner import SceneInterrupted, run_scene
+
+    out_dir = Path(args.out)
+    t0 = time.perf_counter()
+    try:
+        outcomes, rendered = run_scene(
+            scene, out_dir, variants=args.variant or None, progress=not args.quiet,
+            render=not args.no_render,
+        )
+    except SceneInterrupted as stop:
+        sys.stderr.write(f"fem-elastic: {stop.outcome.name}: {stop.outcome.message}\n")
+        return _EXIT_INTERRUPTED
+    _write_scene_summary(out_dir, scene, outcomes, rendered, time.perf_counter() - t0)
+    _print_outcomes(out, outcomes, rendered, out_dir)
+    out(f"total {time.perf_counter() - t0:.1f} s")
+    return 0 if all(o.status == "completed" for o in outcomes) else _EXIT_FAILED
+
+
+def _write_scene_summary(out_dir, scene, outcomes, rendered, seconds) -> None:
+    from .output import write_summary
+
+    write_summary(
+        Path(out_dir) / "summary.json",
+        {
+            "scene": scene.name,
+            "source": str(scene.source),
+            "seconds_total": seconds,
+            "variants": {
+                o.name: {"status": o.status, "message": o.message, "run_dir": o.run_dir.name,
+                         "seconds_simulate": o.seconds_simulate, "seconds_output": o.seconds_output}
+                for o in outcomes
+            },
+            "rendered": [str(Path(p).relative_to(out_dir)) for p in rendered],
+        },
+    )
+
+
+def _run(args) -> int:
+    from .scene import load_scene
+
+    out = _Out(args.quiet)
+    scene = load_scene(args.scene)
+    out(f"scene {scene.name!r} from {args.scene}: variants {', '.join(scene.variants)}")
+    return _run_scene_command(scene, args, out)
+
+
+def _demo(args) -> int:
+    import numpy as np
+
+    from .analytic import RectangularCantilever
+    from .runner import SceneInterrupted, run_scene
+    from .scene import load_scene
+    from .static import solve_static
+
+    out = _Out(args.quiet)
+    demo_path = Path(__file__).resolve().parent / "scenes" / "demo.toml"
+    if args.print_scene:
+        sys.stdout.write(demo_path.read_text())
+        return 0
+    scene = load_scene(demo_path)
+    spec = scene.spec
+    mesh, grav = spec["mesh"], spec["loads"]["gravity"]
+    L, b, h = mesh["length"], mesh["width"], mesh["height"]
+    out(f"fem-elastic demo: {scene.description}")
+    out(f"scene: {demo_path} (print it with `fem-elastic demo --print-scene`)")
+    t0 = time.perf_counter()
+    out_dir = Path(args.out)
+    try:
+        outcomes, rendered = run_scene(scene, out_dir, progress=not args.quiet, render=not args.no_render)
+    except SceneInterrupted as stop:
+        sys.stderr.write(f"fem-elastic: {stop.outcome.name}: {stop.outcome.message}\n")
+        return _EXIT_INTERRUPTED
+    seconds = time.perf_counter() - t0
+    _write_scene_summary(out_dir, scene, outcomes, rendered, seconds)
+
+    # Tip deflection at the end of the run against the static answer of beam theory under
+    # self weight, and against the same discretization solved statically.
+    g = float(np.linalg.norm(grav))
+    out("")
+    out(f"tip deflection at t = {spec['time']['duration']:g} s against the static value under self weight")
+    header = (f"{'variant':<10}{'body':<40}{'tip (mm)':>10}{'static FE (mm)':>16}{'Timoshenko (mm)':>17}"
+              f"{'vs Timo':>9}{'simulate (s)':>14}")
+    out(header)
+    out("-" * len(header))
+    notes = []
+    for o in outcomes:
+        run = o.run
+        body = run.info.get("body_spec") or spec["body"]
+        E, rho = float(body["E"]), float(body["density"])
+        beam = RectangularCantilever(length=L, width=b, height=h, E=E, nu=min(float(body["nu"]), 0.49))
+        w_timo = beam.distributed_load_timoshenko(rho * g * b * h)
+        tip = _tip_vertices(run.model.mesh, L)
+        w_end = -float(np.mean(o.trajectory.displacement[-1, tip, 2])) if o.trajectory is not None else float("nan")
+        w_static = -float(np.mean(solve_static(run.model).displacement[tip, 2]))
+        out(f"{o.name:<10}{run.info.get('body', ''):<40.40}{w_end * 1e3:>10.3f}{w_static * 1e3:>16.3f}"
+            f"{w_timo * 1e3:>17.3f}{w_end / w_timo - 1:>+9.1%}{o.seconds_simulate:>14.2f}")
+        notes.append((o.name, w_end, w_static, w_timo))
+    out("")
+    for name, w_end, w_static, w_timo in notes:
+        settled = abs(w_end - w_static) / abs(w_static)
+        out(f"{name}: the tip ends within {settled:.2%} of the same body's static answer (fe.solve_static), "
+            f"which bends {w_static / w_timo:.2f} x as far as Timoshenko's beam.")
+    out("A spring network calibrated from E is not the solid it stands for: its stiffness depends on\n"
+        "the mesh and its Poisson ratio is fixed near 1/4 (notebooks/springs_vs_fem.ipynb). P2 FEM lands\n"
+        "within a few percent of beam theory; the 3-D clamp makes the solid a little stiffer than a beam.")
+    _print_outcomes(out, outcomes, rendered, out_dir)
+    out(f"total {seconds:.1f} s")
+    return 0 if all(o.status == "completed" for o in outcomes) else _EXIT_FAILED
+
+
+# ---------------------------------------------------------------------------------- render / info
+
+
+def _render(args) -> int:
+    from .errors import InvalidParameter
+    from .render import render_runs
+
+    out = _Out(args.quiet)
+    src = Path(args.dir)
+    if (src / "series.pvd").is_file():
+        run_dirs = [src]
+    else:
+        run_dirs = sorted(p.parent for p in src.glob("*/series.pvd"))
+        order = _variant_order(src)
+        if order:
+            run_dirs.sort(key=lambda p: order.index(p.name) if p.name in order else len(order))
+    if not run_dirs:
+        raise InvalidParameter(
+            f"{src} holds no VTU series (no series.pvd in it or in its subdirectories): give the "
+            "output directory of `fem-elastic run` or `fem-elastic demo`."
+        )
+    target = Path(args.output) if args.output else (
+        src / ("png" if args.format == "png" else f"movie.{args.format}"))
+    t0 = time.perf_counter()
+    written = render_runs(
+        run_dirs, target, format=args.format, size=tuple(args.size), color_by=args.color_by,
+        fps=args.fps, every=args.every, progress=not args.quiet,
+    )
+    out(f"rendered {', '.join(p.name for p in run_dirs)} in {time.perf_counter() - t0:.1f} s:")
+    for line in _collapse_pngs(written, src):
+        out(f"  {line}")
+    return 0
+
+
+def _variant_order(out_dir: Path) -> list:
+    try:
+        return list(json.loads((out_dir / "summary.json").read_text())["variants"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+
+
+def _info(args) -> int:
+    import numpy as np
+
+    from .errors import FemElasticError
+    from .io import load_mesh
+    from .mesh import mesh_quality, validate_mesh
+
+    out = _Out(False)
+    path = Path(args.mesh)
+    if path.suffix == ".toml":
+        from .scene import load_scene
+
+        scene = load_scene(path)
+        mesh = scene.build()[0].model.mesh
+        out(f"{path}: the mesh of scene {scene.name!r}")
+    else:
+        mesh = load_mesh(path, validate=False)
+        out(f"{path}")
+    q = mesh_quality(mesh)
+    lo, hi = q["bounding_box"]
+    out(f"  vertices        {q['n_vertices']}")
+    out(f"  tetrahedra      {q['n_elements']}")
+    out(f"  volume          {q['volume']:.6g} m^3 (tets from {q['min_volume']:.3g} to {q['max_volume']:.3g} m^3)")
+    out(f"  bounding box    [{lo[0]:.4g}, {hi[0]:.4g}] x [{lo[1]:.4g}, {hi[1]:.4g}] x [{lo[2]:.4g}, {hi[2]:.4g}] m")
+    out(f"  quality         mean ratio min {q['min_quality']:.3f}, mean {q['mean_quality']:.3f} "
+        "(1 = regular tet, near 0 = sliver, < 0 = inverted)")
+    out(f"  inverted tets   {q['n_inverted']}")
+    if q["boundaries"]:
+        out("  boundaries      " + ", ".join(f"{k} ({v} facets)" for k, v in q["boundaries"].items()))
+    else:
+        out("  boundaries      none named (fix vertices by index, or name facets in the file)")
+    edges = np.sort(np.asarray(mesh.edges).T, axis=1) if hasattr(mesh, "edges") else None
+    if edges is not None:
+        lengths = np.linalg.norm(mesh.p[:, edges[:, 0]] - mesh.p[:, edges[:, 1]], axis=0)
+        out(f"  edge length     {lengths.min():.4g} to {lengths.max():.4g} m ({edges.shape[0]} edges)")
+    try:
+        validate_mesh(mesh)
+        out("  validation      ok")
+    except FemElasticError as err:
+        out(f"  validation      FAILED: {err}")
+        return _EXIT_FAILED
+    return 0
+
+
+# ---------------------------------------------------------------------------------- study
+
+
+def _study(args) -> int:
+    from . import study
+
+    out = _Out(args.quiet)
+    executor = "serial" if args.serial else None
+    if args.scheduler:
+        try:
+            from dask.distributed import Client
+        except ImportError:
+            from .errors import InvalidParameter
+
+            raise InvalidParameter(
+                "--scheduler needs Dask: pip install \"fem_elastic[cluster]\"."
+            ) from None
+        executor = Client(args.scheduler)
+    run = {"accuracy": study.run_accuracy_study, "stability": study.run_stability_study}[args.which]
+    t0 = time.perf_counter()
+    result = run(Path(args.out), quick=args.quick, executor=executor, workers=args.workers,
+                 progress=not args.quiet)
+    n_err = sum(1 for r in result.rows if r.get("status") == "error")
+    out(f"study {args.which}: {len(result.rows)} runs in {time.perf_counter() - t0:.1f} s"
+        + (f", {n_err} ended in an error (see results.csv)" if n_err else ""))
+    for p in [result.csv_path, result.report_path, *result.figures]:
+        out(f"  {p}")
+    return 0
+
+
+# ---------------------------------------------------------------------------------- parser
+
+
+class _Formatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    pass
+
+
+def _scene_help() -> str:
+    try:
+        from .scene import scene_help
+    except ImportError:  # pragma: no cover - the scene layer is part of the package
+        return ""
+    return "scene file schema:\n\n" + scene_help()
+
+
+def _add_common(p, top: bool = False) -> None:
+    # given before or after the command; a subcommand must not reset what the top level set
+    default = False if top else argparse.SUPPRESS
+    p.add_argument("-q", "--quiet", action="store_true", default=default,
+                   help="no progress bars or tables (for scripts)")
+    p.add_argument("-v", "--verbose", action="store_true", default=default, help="log solver progress")
+
+
+def _add_run_options(p, out_default=None) -> None:
+    if out_default is None:
+        p.add_argument("--out", required=True, metavar="DIR", help="output directory (created)")
+    else:
+        p.add_argument("--out", default=out_default, metavar="DIR", help="output directory (created)")
+    p.add_argument("--no-render", action="store_true",
+                   help="write the VTU series and summary only, no movie or PNG frames")
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="fem-elastic",
         description="Elastic solids with the finite element method (scikit-fem based).",
+        epilog="Run `fem-elastic COMMAND --help` for each command's options.",
     )
-    p.add_argument("-v", "--verbose", action="store_true", help="log solver progress")
+    _add_common(p, top=True)
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
+
     demo = sub.add_parser(
-        "demo",
-        help="solve the default cantilever with every material",
+        "demo", formatter_class=_Formatter,
+        help="run the default scene: a cantilever under gravity, FEM beside springs",
         description=(
-            "Solve the default cantilever statically with each material (linear, StVK, "
-            "Neo-Hookean, stable Neo-Hookean, corotated) and print the tip deflection "
-            "against Euler-Bernoulli and Timoshenko beam theory with the run time of each."
+            "Run the default scene (shipped with the package): a cantilever released from rest "
+            "under gravity, Neo-Hookean FEM beside a mass-spring copy on the same mesh, implicit "
+            "Euler. Writes a VTU series per body, an MP4 and PNG frames side by side, and prints "
+            "each body's tip deflection against the static value of beam theory with its run time."
         ),
     )
-    demo.add_argument("--order", type=int, choices=(1, 2), default=2, help="tet order (default 2)")
-    demo.add_argument(
-        "--cells", type=int, nargs=3, default=(20, 2, 2), metavar=("NX", "NY", "NZ"),
-        help="hexahedral cells along x, y, z, each split into 6 tets (default 20 2 2)",
-    )
-    demo.add_argument("--length", type=_positive_float, default=1.0, help="beam length in m (default 1)")
-    demo.add_argument("--E", type=_positive_float, default=1e9, help="Young's modulus in Pa (default 1e9)")
-    demo.add_argument(
-        "--traction", type=_positive_float, default=1e4,
-        help="downward traction on the free end in Pa (default 1e4, i.e. P = 100 N)",
-    )
+    _add_run_options(demo, out_default="demo_output")
+    demo.add_argument("--print-scene", action="store_true", help="print the demo's scene file and exit")
+    _add_common(demo)
     demo.set_defaults(func=_demo)
+
+    run = sub.add_parser(
+        "run", formatter_class=_Formatter,
+        help="run a scene file (TOML)",
+        description="Run a scene file: simulate each body variant, write VTU series and render.",
+        epilog=_scene_help(),
+    )
+    run.add_argument("scene", metavar="SCENE.toml", help="the scene file")
+    _add_run_options(run)
+    run.add_argument("--variant", action="append", metavar="NAME",
+                     help="run only this variant (repeatable; default all)")
+    _add_common(run)
+    run.set_defaults(func=_run)
+
+    render = sub.add_parser(
+        "render", formatter_class=_Formatter,
+        help="render a run's VTU series to MP4, GIF or PNG frames",
+        description=(
+            "Render the VTU series in DIR (a run directory with series.pvd, or the output "
+            "directory of `run`/`demo`, whose variants are drawn side by side) off-screen."
+        ),
+    )
+    render.add_argument("dir", metavar="DIR", help="output directory of a run")
+    render.add_argument("--format", choices=("mp4", "gif", "png"), default="mp4")
+    render.add_argument("--output", "-o", metavar="PATH",
+                        help="file (mp4/gif) or directory (png) to write; default DIR/movie.FORMAT or DIR/png")
+    render.add_argument("--size", type=_positive_int, nargs=2, default=(960, 540), metavar=("W", "H"),
+                        help="image size in pixels")
+    render.add_argument("--color-by", choices=("von_mises", "displacement"), default="von_mises")
+    render.add_argument("--fps", type=_positive_int, default=30, help="frames per second (mp4, gif)")
+    render.add_argument("--every", type=_positive_int, default=1, help="render every N-th frame")
+    _add_common(render)
+    render.set_defaults(func=_render)
+
+    info = sub.add_parser(
+        "info", formatter_class=_Formatter,
+        help="counts, quality and boundaries of a mesh file",
+        description="Print a tet mesh's counts, element quality, boundaries and validation verdict. "
+                    "MESH is any tet mesh meshio reads (.vtu, .msh, ...) or a scene file (.toml).",
+    )
+    info.add_argument("mesh", metavar="MESH", help="mesh file, or a scene file")
+    _add_common(info)
+    info.set_defaults(func=_info)
+
+    study = sub.add_parser(
+        "study", formatter_class=_Formatter,
+        help="error against run time, and stability on stiff and extreme cases",
+        description=(
+            "accuracy: sweep bodies, element orders, meshes, integrators and time steps on "
+            "analytic cantilevers; record error and wall time; plot error against run time with "
+            "the Pareto front.  stability: sweep stiffness, Poisson ratio and time step for every "
+            "integrator and body, plus extreme cases; a verdict per run and a stability map. "
+            "Results are written as each run finishes; run again to resume."
+        ),
+    )
+    study.add_argument("which", choices=("accuracy", "stability"))
+    study.add_argument("--out", required=True, metavar="DIR", help="output directory (created; resumable)")
+    study.add_argument("--quick", action="store_true", help="a small sweep (seconds, for tests and a first look)")
+    study.add_argument("--workers", type=_positive_int, default=None,
+                       help="worker processes (default: one per core)")
+    study.add_argument("--serial", action="store_true", help="run in this process, one run at a time")
+    study.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run on a Dask cluster, e.g. tcp://host:8786 (needs fem_elastic[cluster])")
+    _add_common(study)
+    study.set_defaults(func=_study)
     return p
 
 
@@ -125,15 +467,20 @@ def main(argv=None) -> int:
     )
     if args.command is None:
         parser.print_help()
-        return 2
+        return _EXIT_USAGE
     try:
         return args.func(args)
     except FemElasticError as exc:
+        from .errors import InvalidMesh, InvalidParameter
+
         sys.stderr.write(f"fem-elastic: error: {exc}\n")
-        return 1
+        return _EXIT_USAGE if isinstance(exc, (InvalidParameter, InvalidMesh)) else _EXIT_FAILED
     except KeyboardInterrupt:
         sys.stderr.write("fem-elastic: interrupted\n")
-        return 130
+        return _EXIT_INTERRUPTED
+    except FileNotFoundError as exc:
+        sys.stderr.write(f"fem-elastic: error: no such file: {exc.filename}\n")
+        return _EXIT_USAGE
 
 
 if __name__ == "__main__":  # pragma: no cover
