@@ -469,7 +469,8 @@ class BuiltRun:
         **options
             Passed on to :func:`fem_elastic.simulate` (``progress``,
             ``callback``, ``check_stability``, ...); the model, integrator,
-            ``dt``, ``steps``, initial ``state`` and ``record_every`` are this run's.
+            ``dt`` are this run's; ``steps`` (or ``t_end``), ``state`` and
+            ``record_every`` default to this run's and may be overridden.
 
         Returns
         -------
@@ -477,8 +478,11 @@ class BuiltRun:
         """
         from .simulate import simulate
 
-        return simulate(self.model, self.integrator, self.dt, steps=self.steps, state=self.state,
-                        record_every=self.record_every, **options)
+        settings = {"steps": self.steps, "state": self.state, "record_every": self.record_every}
+        if "t_end" in options:  # an end time replaces the scene's step count
+            settings.pop("steps")
+        settings.update(options)
+        return simulate(self.model, self.integrator, self.dt, **settings)
 
 
 @dataclass(frozen=True)

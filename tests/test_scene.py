@@ -468,3 +468,13 @@ def test_a_key_in_the_wrong_table_says_where_it_belongs():
     err = error_of(text)
     assert err.key == "body.gravity" and err.line == line_of(text, "gravity = [0.0, 0.0, -9.81]")
     assert "gravity is a key of [loads]" in str(err)
+
+
+def test_built_run_simulate_takes_overrides():
+    """``run.simulate`` uses the scene's settings, and a step count or end time given replaces them."""
+    run = parse_scene(BASE).build(["fem"])[0]
+    assert run.steps == 5  # duration 0.05 s at dt 0.01 s
+    assert run.simulate().steps == 5
+    assert run.simulate(steps=2).steps == 2
+    traj = run.simulate(t_end=0.03, record_every=3)
+    assert traj.steps == 3 and traj.times.size == 2
