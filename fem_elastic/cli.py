@@ -481,6 +481,19 @@ def main(argv=None) -> int:
     except FileNotFoundError as exc:
         sys.stderr.write(f"fem-elastic: error: no such file: {exc.filename}\n")
         return _EXIT_USAGE
+    except BrokenPipeError:
+        # the reader of our output went away (`fem-elastic info MESH | head`): stop quietly
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return _EXIT_FAILED
+    except OSError as exc:
+        # a path the user gave that cannot be read or written: a directory where a file is
+        # expected, a file where a directory is, no permission, a full disk
+        where = f": {exc.filename}" if exc.filename else ""
+        sys.stderr.write(f"fem-elastic: error: {exc.strerror or exc}{where}; check the path and "
+                         "its permissions.\n")
+        return _EXIT_USAGE
 
 
 if __name__ == "__main__":  # pragma: no cover

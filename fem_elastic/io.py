@@ -169,18 +169,25 @@ def load_mesh(path, *, reorient: bool = False, validate: bool = True) -> MeshTet
     import meshio
 
     path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "Is a directory, not a mesh file", str(path))
     if not path.is_file():
         raise FileNotFoundError(errno.ENOENT, "Mesh file not found", str(path))
     _, file_format, listed_first = _file_format(path)  # unknown extension -> InvalidParameter
     try:
+        mio = _meshio_read(meshio, path, file_format)
+    except meshio.ReadError:
+        if file_format == listed_first:
+            raise InvalidMesh(f"meshio could not read {str(path)!r} as {file_format}: "
+                              f"{_READ_FAILURES.pop(path, 'unknown reason')}. Check that it is a "
+                              "tet mesh in that format (re-export it, e.g. with gmsh or "
+                              "fe.save_mesh).") from None
         try:
-            mio = meshio.read(path, file_format=file_format)
+            mio = _meshio_read(meshio, path, None)  # e.g. an ANSYS .msh: try every candidate
         except meshio.ReadError:
-            if file_format == listed_first:
-                raise
-            mio = meshio.read(path)  # e.g. an ANSYS .msh: let meshio try every candidate
-    except meshio.ReadError as err:
-        raise InvalidMesh(f"meshio could not read {str(path)!r}: {err}") from err
+            raise InvalidMesh(f"meshio could not read {str(path)!r} in any format of its "
+                              f"extension: {_READ_FAILURES.pop(path, 'unknown reason')}. Check "
+                              "that it is a tet mesh file.") from None
 
     types = [block.type for block in mio.cells]
     linear = [i for i, t in enumerate(types) if t == "tetra"]
@@ -263,6 +270,35 @@ def _new_file_mode(path: Path) -> int:
     umask = os.umask(0)
     os.umask(umask)
     return 0o666 & ~umask
+
+
+_READ_FAILURES: dict = {}  # path -> why its last _meshio_read failed
+
+
+def _meshio_read(meshio, path: Path, file_format):
+    """``meshio.read``, with every failure turned into ``meshio.ReadError``.
+
+    When no reader succeeds, meshio prints the reader's error to stdout and
+    calls ``sys.exit(1)``; a reader may also raise anything a malformed file
+    provokes (XML, zlib, struct, value errors). Both would end the caller's
+    process or escape as an untyped error, so they are caught here, the
+    printed text is kept, and the reason is left in ``_READ_FAILURES[path]``.
+    """
+    import contextlib
+    import io as _io
+
+    printed = _io.StringIO()
+    try:
+        with contextlib.redirect_stdout(printed), contextlib.redirect_stderr(printed):
+            return meshio.read(path, file_format=file_format)
+    except SystemExit:
+        reason = printed.getvalue().replace("Error:", "").strip() or "not readable"
+    except meshio.ReadError as err:
+        reason = str(err)
+    except Exception as err:  # a malformed file: ParseError, zlib.error, ValueError, ...
+        reason = f"{type(err).__name__}: {err}"
+    _READ_FAILURES[path] = " ".join(reason.split())
+    raise meshio.ReadError(_READ_FAILURES[path])
 
 
 def save_mesh(mesh: MeshTet, path) -> Path:

@@ -349,18 +349,19 @@ class SeriesWriter:
 
     def _summary(self, trajectory, final, status, message, extra) -> dict:
         m = self.model
+        # the scene's description first, then what the run did: a figure of the run (steps
+        # taken, t_end, ...) must never be overwritten by a planned value of the same name
+        out = dict(self.info)
         if trajectory is not None:
-            out = trajectory.summary()
+            out.update(trajectory.summary())
         else:  # interrupted: what the writer itself saw
-            out = {"steps": self._steps_seen,
-                   "t_end": None if final is None else float(final.t),
-                   "wall_time": time.perf_counter() - self._start}
+            out.update({"steps": self._steps_seen,
+                        "t_end": None if final is None else float(final.t),
+                        "wall_time": time.perf_counter() - self._start})
             if final is not None:
-                # lumped-mass kinetic energy: the integrator's mass is not known here
-                out["energy_final"] = m.kinetic_energy(final.v, "lumped") + m.energy(final.x)
+                out["energy_final"] = self._energy(final)
         out["status"] = status
         out["message"] = message or out.get("message", "") or status
-        out.update(self.info)
         out.setdefault("ground", _ground_info(m))
         out["n_vertices"] = int(self._X.shape[0])
         out["n_tets"] = int(self._tets.shape[0])
@@ -371,6 +372,21 @@ class SeriesWriter:
                 out[f"{name}_min"], out[f"{name}_max"] = _field_range(values)
         out.update(extra or {})
         return out
+
+    def _energy(self, state):
+        """Total energy (J) of ``state`` for an interrupted run's summary, or None.
+
+        Lumped-mass kinetic energy (the integrator's mass is not known here).
+        The run was stopped at an arbitrary point (Ctrl-C may even have cut an
+        import short), so a failure here is logged and the figure left out:
+        the summary, which says how the run ended, matters more.
+        """
+        try:
+            return self.model.kinetic_energy(state.v, "lumped") + self.model.energy(state.x)
+        except Exception as err:
+            log.warning("%s: energy of the last state not evaluated (%s: %s)", self.run_dir,
+                        type(err).__name__, err)
+            return None
 
     # context manager ------------------------------------------------------------------
     def __enter__(self) -> "SeriesWriter":

@@ -192,4 +192,25 @@ def run_scene(scene, out_dir, *, variants=None, progress: bool = False, render: 
     rendered = []
     if render and runs:
         rendered = render_outputs(out_dir, [o.run_dir for o in outcomes], runs[0].output, progress=progress)
+    if runs and not runs[0].output.get("vtu", True):
+        for o in outcomes:
+            _remove_series(o.run_dir)
     return outcomes, rendered
+
+
+def _remove_series(run_dir: Path) -> None:
+    """Remove a run's VTU series (``[output] vtu = false``), keeping its ``summary.json``.
+
+    The series is written during the run all the same: the renders are drawn
+    from it, and it keeps the frames of a run that is interrupted or diverges.
+    """
+    from .output import FRAMES_DIR, PVD_NAME
+
+    (run_dir / PVD_NAME).unlink(missing_ok=True)  # first: no reader sees a half-removed series
+    frames = run_dir / FRAMES_DIR
+    for p in sorted(frames.glob("frame_*.vtu")):
+        p.unlink(missing_ok=True)
+    try:
+        frames.rmdir()
+    except OSError:  # something else lives there: leave it
+        pass

@@ -728,5 +728,5 @@ class Scene:
             "integrator_options": {k: v for k, v in integ.items() if k != "type"},
             "dt": spec["time"]["dt"],
             "duration": spec["time"]["duration"],
-            "steps": steps,
+            "steps_planned": steps,
         }

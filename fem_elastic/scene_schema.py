@@ -20,6 +20,7 @@ from __future__ import annotations
 import difflib
 import inspect
 import math
+import re
 import textwrap
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -713,6 +714,29 @@ def _damping_rule(table: dict, path: tuple) -> dict:
     return table
 
 
+def _output_rule(table: dict, path: tuple) -> dict:
+    w, h = table["size"]
+    if "mp4" in table["render"] and (w % 2 or h % 2):
+        # checked here, before the run: the renderer would refuse it only after simulating
+        raise Invalid(path + ("size",), f"size = [{w}, {h}]: an MP4 (H.264, yuv420p) needs an "
+                                        f"even width and height; use e.g. [{w + w % 2}, {h + h % 2}].")
+    return table
+
+
+#: A run's name is the name of its directory under the output directory.
+RUN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]*")
+
+#: Names the output directory uses itself (PNG frames of the renders).
+RESERVED_RUN_NAMES = ("png",)
+
+
+def _check_run_name(name: str, path: tuple) -> None:
+    if not RUN_NAME.fullmatch(name) or name in RESERVED_RUN_NAMES:
+        raise Invalid(path, f'the run name "{name}" cannot name its output folder: use letters, '
+                            'digits, "_" and "-" (starting with a letter or digit), and not '
+                            f'{", ".join(map(repr, RESERVED_RUN_NAMES))}; e.g. name = "fem".')
+
+
 def _compare_rule(table: dict, path: tuple) -> dict:
     if table["body"] is None and table["integrator"] is None:
         raise Invalid(path, "a [[compare]] run needs a body or an integrator (or both) to "
@@ -857,14 +881,14 @@ SCENE_FILE = Table(
         ), "Time stepping: ceil(duration / dt) steps."), REQUIRED, doc="time stepping"),
         Key("output", Table("output", (
             Key("every", Integer(ge=1), 1, doc="record a frame every this many steps"),
-            Key("vtu", Boolean(), True, doc="write the VTU frames and the PVD series"),
+            Key("vtu", Boolean(), True, doc="keep the VTU frames and the PVD series (false: only summary.json and the renders)"),
             Key("render", Array(Choice(RENDER_FORMATS), None, 'array of "mp4" | "gif" | "png"'),
                 ["mp4"], doc="movies and pictures to render ([] for none)"),
             Key("color_by", Choice(COLOR_FIELDS), "von_mises", doc="field the renders are coloured by"),
             Key("size", Array(Integer(ge=16), 2, "[width, height] integers >= 16"), [960, 540], "px",
                 "render size"),
             Key("fps", Integer(ge=1), 30, "frames/s", "movie frame rate"),
-        ), "What the run writes."), {}, doc="outputs"),
+        ), "What the run writes.", rule=_output_rule), {}, doc="outputs"),
         Key("compare", TableArray(COMPARE), [], doc="further runs, [[compare]]"),
     ),
     "A scene file.",
@@ -918,7 +942,9 @@ def validate(document: dict) -> dict:
     """
     spec = SCENE_FILE.check(document, ())
     names = [spec["body"]["name"]]
+    _check_run_name(names[0], ("body", "name"))
     for i, run in enumerate(spec["compare"]):
+        _check_run_name(run["name"], ("compare", i, "name"))
         if run["name"] in names:
             raise Invalid(
                 ("compare", i, "name"),

@@ -175,6 +175,32 @@ def test_missing_scene_file_is_a_clean_error(tmp_path):
     clean_error(run("run", tmp_path / "nope.toml", "--out", tmp_path / "o"), "nope.toml")
 
 
+def test_paths_that_cannot_be_used_are_clean_errors(tiny, tmp_path):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("")
+    # an output directory under a file: mkdir fails with NotADirectoryError
+    clean_error(run("run", tiny, "--out", a_file / "out", "--quiet"), "Not a directory", "a_file")
+    # a mesh file meshio cannot read (meshio itself would call sys.exit), a directory
+    (tmp_path / "broken.vtu").write_text("garbage")
+    r = run("info", tmp_path / "broken.vtu")
+    assert r.returncode == 2
+    clean_error(r, "could not read", "broken.vtu")
+    clean_error(run("info", tmp_path), "Is a directory")
+
+
+def test_vtu_false_keeps_only_the_summary(tiny, tmp_path):
+    tiny.write_text(TINY.replace("every = 2", "every = 2\nvtu = false").replace(
+        'render = ["gif", "png"]', 'render = ["gif"]'))
+    out = tmp_path / "o"
+    r = run("run", tiny, "--out", out, "--quiet")
+    assert r.returncode == 0, r.stderr
+    for variant in ("fem", "springs"):
+        assert not (out / variant / "series.pvd").exists()
+        assert not (out / variant / "frames").exists()
+        assert json.loads((out / variant / "summary.json").read_text())["status"] == "completed"
+    assert (out / "movie.gif").stat().st_size > 0  # rendered from the series before it went
+
+
 def test_render_each_format(tiny, tmp_path):
     out = tmp_path / "r"
     assert run("run", tiny, "--out", out, "--quiet", "--no-render").returncode == 0

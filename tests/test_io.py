@@ -108,6 +108,22 @@ def test_missing_file(tmp_path):
         load_mesh(path)
 
 
+@pytest.mark.parametrize("content", [b"garbage", b'<VTKFile type="UnstructuredGrid"><Unstr'])
+def test_unreadable_file_is_invalid_mesh_not_an_exit(tmp_path, content, capsys):
+    # meshio prints the reader's error and calls sys.exit(1) when no reader succeeds; that
+    # must reach the caller as InvalidMesh (with meshio's reason), not end the process
+    path = tmp_path / "broken.vtu"
+    path.write_bytes(content)
+    with pytest.raises(InvalidMesh, match="could not read .*broken.vtu"):
+        load_mesh(path)
+    assert capsys.readouterr().out == ""  # nothing printed by the library
+
+
+def test_directory_is_not_a_mesh_file(tmp_path):
+    with pytest.raises(IsADirectoryError):
+        load_mesh(tmp_path)
+
+
 def test_unknown_extension(tmp_path):
     path = tmp_path / "beam.xyz"
     path.write_text("1 2 3\n")

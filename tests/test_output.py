@@ -275,3 +275,33 @@ def test_finish_on_a_given_final_state(tmp_path):
     np.testing.assert_array_equal(series.times, [0.0, 0.5])  # the callback wrote no frame
     np.testing.assert_allclose(series.displacement[-1], run.displacement[-1], rtol=0, atol=1e-12)
     assert series.summary["message"] == "stopped by hand" and series.summary["steps"] == 3
+
+
+def test_run_figures_win_over_the_scene_info_of_the_same_name(tmp_path):
+    # The scene passes its plan as info (e.g. "steps" it meant to take); a run that stopped
+    # early must report the steps it took, not the plan.
+    model = _model()
+    writer = SeriesWriter(model, tmp_path, info={"steps": 100, "t_end": 1.0, "variant": "fem"})
+    writer.write_state(fe.State.rest(model))
+    run = fe.simulate(model, fe.ImplicitEuler(), dt=0.01, steps=3, callback=writer.callback)
+    writer.finish(run, status="diverged", message="stopped")
+    s = read_series(tmp_path).summary
+    assert s["steps"] == 3 and s["t_end"] == pytest.approx(0.03, rel=1e-12)  # round-off of 3 x 0.01
+    assert s["variant"] == "fem"  # info that the run does not know is kept
+
+
+def test_interrupted_summary_survives_a_failing_energy(tmp_path, monkeypatch):
+    # Ctrl-C can land in the middle of a lazy import (numba's, on the first energy
+    # evaluation); evaluating the energy again for the summary then fails too. The summary,
+    # which says how the run ended, must still be written.
+    model = _model()
+    writer = SeriesWriter(model, tmp_path)
+    writer.write_state(fe.State.rest(model))
+
+    def broken(*args, **kwargs):
+        raise AttributeError("partially initialized module 'numba.core.types'")
+
+    monkeypatch.setattr(type(model), "energy", broken)
+    writer.finish(None, status="interrupted", message="interrupted after 0 steps")
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert s["status"] == "interrupted" and s["energy_final"] is None and s["frames"] == 1

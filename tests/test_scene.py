@@ -126,6 +126,16 @@ ERRORS = [
     ('name = "springs"', 'name = "fem"', "compare[0].name", 'name = "fem"', ['"fem" is already used'], None),
     ("[time]", "[damping]\nalpha = 1.0\nratios = [0.1, 0.1]\nfrequencies = [1.0, 5.0]\n[time]",
      "damping.ratios", "ratios", ["not both"], None),
+    # an MP4 needs an even size: refused before the run, not by the renderer after it
+    ("[time]", '[output]\nrender = ["mp4"]\nsize = [161, 120]\n[time]', "output.size", "size =",
+     ["even width and height", "[162, 120]"], None),
+    # run names are folder names under --out: no escaping it, no clash with its png/ folder
+    ('name = "springs"', 'name = "../springs"', "compare[0].name", 'name = "../springs"',
+     ['"../springs" cannot name its output folder'], None),
+    ('name = "springs"', 'name = "png"', "compare[0].name", 'name = "png"',
+     ['"png" cannot name its output folder'], None),
+    ("[body]\n", '[body]\nname = ""\n', "body.name", 'name = ""', ['"" cannot name its output folder'],
+     None),
 ]
 
 
@@ -305,7 +315,7 @@ def test_built_run_fields():
     assert (info["scene"], info["variant"], info["E"], info["nu"], info["order"]) == ("t", "fem", 1e6, 0.3, 1)
     assert info["mesh"]["kind"] == "beam" and info["mesh"]["cells"] == [4, 1, 1]
     assert (info["n_vertices"], info["n_tets"]) == (20, 24)
-    assert info["integrator"] == "ImplicitEuler" and info["steps"] == 4
+    assert info["integrator"] == "ImplicitEuler" and info["steps_planned"] == 4
     assert info["body_spec"]["material"] == "neo_hookean"
     json.dumps(info)
     # 1/60 s steps over 3 s: 180 steps, although 3.0 / (1/60) is a hair above 180 in floating point
