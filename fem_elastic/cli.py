@@ -117,15 +117,21 @@ def _run_scene_command(scene, args, out) -> int:
             render=not args.no_render,
         )
     except SceneInterrupted as stop:
-        sys.stderr.write(f"fem-elastic: {stop.outcome.name}: {stop.outcome.message}\n")
-        return _EXIT_INTERRUPTED
+        return _interrupted(stop, out_dir, scene, time.perf_counter() - t0)
     _write_scene_summary(out_dir, scene, outcomes, rendered, time.perf_counter() - t0)
     _print_outcomes(out, outcomes, rendered, out_dir)
     out(f"total {time.perf_counter() - t0:.1f} s")
     return 0 if all(o.status == "completed" for o in outcomes) else _EXIT_FAILED
 
 
-def _write_scene_summary(out_dir, scene, outcomes, rendered, seconds) -> None:
+def _interrupted(stop, out_dir, scene, seconds) -> int:
+    """Ctrl-C: say what stopped, keep the scene's summary true, exit 130."""
+    _write_scene_summary(out_dir, scene, stop.outcomes, [], seconds, status="interrupted")
+    sys.stderr.write(f"fem-elastic: {stop.outcome.name}: {stop.outcome.message}\n")
+    return _EXIT_INTERRUPTED
+
+
+def _write_scene_summary(out_dir, scene, outcomes, rendered, seconds, status=None) -> None:
     from .output import write_summary
 
     write_summary(
@@ -133,6 +139,8 @@ def _write_scene_summary(out_dir, scene, outcomes, rendered, seconds) -> None:
         {
             "scene": scene.name,
             "source": str(scene.source),
+            "status": status or ("completed" if all(o.status == "completed" for o in outcomes)
+                                 else "failed"),
             "seconds_total": seconds,
             "variants": {
                 o.name: {"status": o.status, "message": o.message, "run_dir": o.run_dir.name,
@@ -177,8 +185,7 @@ def _demo(args) -> int:
     try:
         outcomes, rendered = run_scene(scene, out_dir, progress=not args.quiet, render=not args.no_render)
     except SceneInterrupted as stop:
-        sys.stderr.write(f"fem-elastic: {stop.outcome.name}: {stop.outcome.message}\n")
-        return _EXIT_INTERRUPTED
+        return _interrupted(stop, out_dir, scene, time.perf_counter() - t0)
     seconds = time.perf_counter() - t0
     _write_scene_summary(out_dir, scene, outcomes, rendered, seconds)
 
@@ -336,7 +343,12 @@ def _study(args) -> int:
 
 
 class _Formatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
-    pass
+    """Keeps the epilog's layout; shows a default only where there is one worth showing."""
+
+    def _get_help_string(self, action):
+        if action.default in (None, False, argparse.SUPPRESS) or action.required:
+            return action.help
+        return super()._get_help_string(action)
 
 
 def _scene_help() -> str:

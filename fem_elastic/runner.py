@@ -61,11 +61,20 @@ class RunOutcome:
 
 
 class SceneInterrupted(KeyboardInterrupt):
-    """Ctrl-C during a run; carries the outcome of the run it stopped (``.outcome``)."""
+    """Ctrl-C during a scene.
 
-    def __init__(self, outcome: RunOutcome):
+    Attributes
+    ----------
+    outcome : RunOutcome
+        What was stopped: a run (its frames so far are readable), or the rendering.
+    outcomes : list of RunOutcome
+        Every run of the scene so far, the stopped one included.
+    """
+
+    def __init__(self, outcome: RunOutcome, outcomes=None):
         super().__init__(outcome.message)
         self.outcome = outcome
+        self.outcomes = list(outcomes) if outcomes is not None else [outcome]
 
 
 def run_variant(run, out_dir, *, progress: bool = False) -> RunOutcome:
@@ -188,10 +197,22 @@ def run_scene(scene, out_dir, *, variants=None, progress: bool = False, render: 
         raise InvalidParameter(f"--out {out_dir} is a file; give a directory for the run's output.")
     out_dir.mkdir(parents=True, exist_ok=True)
     runs = scene.build(variants)
-    outcomes = [run_variant(run, out_dir, progress=progress) for run in runs]
+    outcomes = []
+    for run in runs:
+        try:
+            outcomes.append(run_variant(run, out_dir, progress=progress))
+        except SceneInterrupted as stop:
+            raise SceneInterrupted(stop.outcome, outcomes + [stop.outcome]) from None
     rendered = []
     if render and runs:
-        rendered = render_outputs(out_dir, [o.run_dir for o in outcomes], runs[0].output, progress=progress)
+        try:
+            rendered = render_outputs(out_dir, [o.run_dir for o in outcomes], runs[0].output,
+                                      progress=progress)
+        except KeyboardInterrupt:
+            stop = RunOutcome("render", out_dir, "interrupted", (
+                f"interrupted while rendering; the VTU series are complete: `fem-elastic render "
+                f"{out_dir}` renders them"))
+            raise SceneInterrupted(stop, outcomes) from None
     if runs and not runs[0].output.get("vtu", True):
         for o in outcomes:
             _remove_series(o.run_dir)

@@ -270,6 +270,9 @@ def test_sigint_leaves_readable_files_and_a_clear_message(tmp_path):
     assert series.times.size >= 5 and np.isfinite(series.displacement).all()
     summary = json.loads((out / "fem" / "summary.json").read_text())
     assert summary["status"] == "interrupted"
+    scene_summary = json.loads((out / "summary.json").read_text())
+    assert scene_summary["status"] == "interrupted"
+    assert scene_summary["variants"]["fem"]["status"] == "interrupted"
     # no half-written file is left under a final name
     assert not [p for p in (out / "fem").rglob("*") if p.name.startswith(".") or p.suffix == ".tmp"]
 
