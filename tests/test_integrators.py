@@ -236,3 +236,37 @@ def test_record_every_and_statistics(linear_beam):
     ex = fe.simulate(model, fe.RK4(), 1e-5, steps=3, state=s0, check_stability=False)
     assert (ex.step_stats["gradient_evaluations"] == 4).all()
     assert (ex.step_stats["newton_iterations"] == 0).all()
+
+
+def _kicked_stiff_beam(material, speed):
+    """A 100 GPa cantilever given a seeded random velocity of ``speed`` m/s per component."""
+    model = fe.Model(fe.beam_mesh(cells=(6, 1, 1)), density=1000.0,
+                     body=fe.ElasticBody(material(E=1e11, nu=0.3)), fixed="left",
+                     gravity=(0.0, 0.0, -9.81))
+    rest = fe.State.rest(model)
+    v = np.random.default_rng(0).standard_normal(rest.x.shape) * speed
+    v[~model.free_at(0.0)] = 0.0
+    return model, fe.State(rest.x, v, 0.0)
+
+
+def test_implicit_euler_does_not_gain_energy_from_a_bad_first_guess():
+    """From y = x_n + h v_n (here inverted: 1000 m/s for 1/24 s), Newton once converged to an
+    inverted minimum of StVK and took the energy from 1.2e7 J to 3.4e9 J in one step. Starting
+    from whichever of y and x_n has the lower incremental potential G, the minimiser has
+    G(x_1) <= G(x_0) = E(x_0) + KE_0, so the potential energy cannot exceed the initial total."""
+    model, s0 = _kicked_stiff_beam(fe.StVK, 1000.0)
+    s1 = fe.ImplicitEuler().step(model, s0, 1 / 24)
+    e0 = model.energy(s0.x) + model.kinetic_energy(s0.v)
+    # G(x_1) = E(x_1) + 1/2 |v_1 - v_0|_M^2 <= G(x_0); Newton's tolerance is far below 1e-6 of e0
+    assert model.energy(s1.x) + model.kinetic_energy(s1.v - s0.v) <= e0 * (1 + 1e-6)
+    assert model.energy(s1.x) + model.kinetic_energy(s1.v) < e0
+
+
+def test_linearized_implicit_euler_from_an_inverted_state_diverges_with_the_reason():
+    """The tangent of Neo-Hookean is undefined at J <= 0: a clear Diverged, not a LinAlgError."""
+    model = fe.Model(fe.beam_mesh(cells=(2, 1, 1)), density=1000.0,
+                     body=fe.ElasticBody(fe.NeoHookean(E=1e5, nu=0.3)), fixed="left")
+    state = fe.State.rest(model, displacement=lambda p: p * [-2.5, 0.0, 0.0])  # p: (nodes, 3)
+    assert not np.isfinite(model.energy(state.x))  # x -> -1.5 x: every element inverted
+    with pytest.raises(fe.Diverged, match="inverted at the start of the step"):
+        fe.simulate(model, fe.LinearizedImplicitEuler(), dt=0.01, steps=2, state=state)

@@ -35,6 +35,10 @@ from .incremental import IncrementalPotential
 
 __all__ = ["ImplicitEuler", "LinearizedImplicitEuler"]
 
+_INVERTED_AT_START = (
+    "an element is inverted at the start of the step (in the state given, or by the prescribed "
+    "boundary motion over one step), where the body's energy is not defined"
+)
 log = logging.getLogger(__name__)
 
 
@@ -162,14 +166,19 @@ class ImplicitEuler(_Implicit):
     def _try(self, model, state, h, stats):
         free, dofs, xc, vc = self._start(model, state, h)
         G = self._objective(model, state, h)
-        # first guess: the inertial prediction; if it inverts an element, the old positions
+        # First guess: the inertial prediction y or the old positions, whichever has the lower
+        # incremental potential. Starting no higher than x_n means the minimiser Newton reaches
+        # has G(x_{n+1}) <= G(x_n), the discrete energy bound of implicit Euler; from y alone a
+        # stiff body at a large dt can land in an inverted basin and gain energy.
         x0 = G.y.copy()
         x0[dofs] = xc
-        if not math.isfinite(G.energy(x0)):
-            x0 = state.x.copy()
-            x0[dofs] = xc
-            if not math.isfinite(G.energy(x0)):
-                return None, "the prescribed boundary motion inverts an element in one step"
+        x_old = state.x.copy()
+        x_old[dofs] = xc
+        g0, g_old = G.energy(x0), G.energy(x_old)
+        if not math.isfinite(g0) or g_old < g0:
+            x0, g0 = x_old, g_old
+        if not math.isfinite(g0):
+            return None, _INVERTED_AT_START
         scale = G.scale(state, free)
         counted = _Counted(G)
         res = newton_minimize(
@@ -248,6 +257,8 @@ class LinearizedImplicitEuler(_Implicit):
         G = IncrementalPotential(model, state.x + h * state.v, h, self.mass, state.x)
         x0 = state.x.copy()
         x0[dofs] = xc
+        if self._warped(model) is None and not math.isfinite(model.energy(x0)):
+            return None, _INVERTED_AT_START  # the tangent is not defined there
         t0 = time.perf_counter()
         # the model's terms, with the warped stiffness in place of the body's for stiffness warping
         model_terms = model.linearize(x0, project=self.project, body=self._warped(model))
