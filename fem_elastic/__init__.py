@@ -13,7 +13,8 @@ The public surface (see ``DESIGN.md``)::
 imported inside the I/O functions, pyamg inside the AMG solver.
 """
 
-from .analytic import RectangularCantilever
+from . import study
+from .analytic import RectangularCantilever, elastica_tip
 from .contact import Box, Ground, Obstacle, Sphere
 from .damping import Rayleigh
 from .driven import Motion, Prescribed, Translate, Twist
@@ -73,6 +74,7 @@ from .trajectory import Trajectory
 __version__ = "0.1.0"
 
 __all__ = [
+    "study", "elastica_tip",
     "CellFields", "cell_fields", "von_mises", "SeriesData", "read_series", "write_pvd", "write_vtu_frame",
     "SeriesWriter", "write_summary",
     "BuiltRun", "Scene", "SceneError", "load_scene", "parse_scene", "scene_help",

@@ -25,10 +25,9 @@ import math
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
-from scipy.optimize import brentq
 
 import fem_elastic as fe
+from fem_elastic.analytic import elastica_tip as elastica
 from fem_elastic.loads import traction_load
 
 E, NU, RHO, G = 1e9, 0.3, 1000.0, 9.81
@@ -223,24 +222,6 @@ def test_nonlinear_materials_linearize_to_linear_elasticity(Material):
     assert diffs[0] / diffs[1] == pytest.approx(2.0, rel=0.1)  # linear in the load
     assert dz[0] < 1e-4
     assert dz[0] / dz[1] > 3.0  # quadratic in the load (measured 3.9 - 4.1)
-
-
-def elastica(alpha):
-    """Inextensible elastica of a cantilever with a dead vertical tip load, alpha = P L^2/EI.
-
-    theta'' = -alpha cos(theta) on s in [0, 1], theta(0) = 0, theta'(1) = 0 (shooting).
-    Returns (tip deflection, tip shortening) / L. alpha = 1 gives 0.3017, 0.0564
-    (Bisshopp & Drucker 1945).
-    """
-    def rhs(s, y):
-        return [y[1], -alpha * math.cos(y[0]), math.sin(y[0]), math.cos(y[0])]
-
-    def end(k0):
-        return solve_ivp(rhs, (0.0, 1.0), [0.0, k0, 0.0, 0.0], rtol=1e-11, atol=1e-12).y[:, -1]
-
-    k0 = brentq(lambda k: end(k)[1], 0.0, alpha * (1 + 1e-9))
-    y = end(k0)
-    return y[2], 1.0 - y[3]
 
 
 def test_elastica_reference():
