@@ -23,7 +23,7 @@ _IDS = {
     "sweep/SymplecticEuler/linear/E=1e+07/nu=0.3/dt=0.001",   # 1.75 x its critical dt: diverges
     "sweep/SymplecticEuler/linear/E=1e+07/nu=0.3/dt=1e-05",   # 0.02 x: stable
     "sweep/ImplicitEuler/linear/E=1e+07/nu=0.3/dt=0.0416667",    # frame-rate step: stable
-    "sweep/Newmark/springs/E=1e+11/nu=0.25/dt=0.0416667",     # runs into the work limit
+    "sweep/ImplicitEuler/corotated/E=1000/nu=0.3/dt=0.01",    # runs into the work limit
     "critical/SymplecticEuler/linear/E=1e+07/nu=0.3",
     "critical/RK4/linear/E=1e+07/nu=0.3",
     "extreme/crush/ImplicitEuler/neohookean/dt=0.0416667",
@@ -212,7 +212,7 @@ def test_rejected_and_work_limit_rows(study):
     with pytest.raises(fe.InvalidMesh) as err:  # what fe.Model says of that mesh
         fe.Model(sc.sliver_mesh(1e-12), density=1000.0, body=fe.ElasticBody(fe.NeoHookean(E=1e5, nu=0.3)))
     assert rej["reason"] == f"InvalidMesh: {err.value}"
-    wl = _row(res, "sweep/Newmark/springs/E=1e+11/nu=0.25/dt=0.0416667")
+    wl = _row(res, "sweep/ImplicitEuler/corotated/E=1000/nu=0.3/dt=0.01")
     assert wl["verdict"] == "work limit" and wl["step"] < 100
     assert f"(limit {st.WORK_LIMIT})" in wl["reason"]
 
