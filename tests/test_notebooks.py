@@ -39,6 +39,11 @@ EXPECTED = {
         ["Stability, predicted against observed", "With Rayleigh damping", "Energy", "Accuracy", "Cost"],
         4,
     ),
+    "error_vs_runtime.ipynb": (
+        ["Error budgets", "P1 locking", "Springs", "Large deflection", "Time integration",
+         "Linearized implicit Euler"],
+        3,
+    ),
 }
 
 

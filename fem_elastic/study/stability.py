@@ -213,7 +213,7 @@ def study_cases(quick: bool = False) -> list:
     --------
     >>> cases = study_cases(quick=True)
     >>> sorted({c.params["kind"] for c in cases}), len(cases)
-    (['critical', 'extreme', 'sweep'], 77)
+    (['critical', 'extreme', 'sweep'], 78)
     """
     sweep, critical, extreme = [], [], []
     for integ in INTEGRATORS:
