@@ -315,22 +315,39 @@ def _info(args) -> int:
 def _study(args) -> int:
     from . import study
 
+    from .errors import InvalidParameter
+
     out = _Out(args.quiet)
     executor = "serial" if args.serial else None
-    if args.scheduler:
+    client = None
+    if args.scheduler is not None:
+        address = args.scheduler.strip()
+        if args.serial:
+            raise InvalidParameter("--serial and --scheduler exclude each other: give one of them.")
+        if not address:
+            raise InvalidParameter("--scheduler needs the scheduler's address, e.g. tcp://host:8786.")
         try:
             from dask.distributed import Client
         except ImportError:
-            from .errors import InvalidParameter
-
             raise InvalidParameter(
                 "--scheduler needs Dask: pip install \"fem_elastic[cluster]\"."
             ) from None
-        executor = Client(args.scheduler)
+        try:
+            client = executor = Client(address)
+        except (OSError, ValueError, TypeError) as exc:  # unreachable (OSError, TimeoutError), malformed
+            raise InvalidParameter(
+                f"cannot use the Dask scheduler at {address!r} ({type(exc).__name__}: {exc}); check the "
+                "address (tcp://host:8786) and that a scheduler runs there (`dask scheduler`, with workers "
+                "started by `dask worker ADDRESS --nthreads 1`)."
+            ) from None
     run = {"accuracy": study.run_accuracy_study, "stability": study.run_stability_study}[args.which]
     t0 = time.perf_counter()
-    result = run(Path(args.out), quick=args.quick, executor=executor, workers=args.workers,
-                 progress=not args.quiet)
+    try:
+        result = run(Path(args.out), quick=args.quick, executor=executor, workers=args.workers,
+                     progress=not args.quiet)
+    finally:
+        if client is not None:
+            client.close()
     n_err = sum(1 for r in result.rows if r.get("status") == "error")
     out(f"study {args.which}: {len(result.rows)} runs in {time.perf_counter() - t0:.1f} s"
         + (f", {n_err} ended in an error (see results.csv)" if n_err else ""))

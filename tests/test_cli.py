@@ -302,3 +302,15 @@ def test_study_quick_through_the_command(which, tmp_path):
     r = run("study", which, "--quick", "--serial", "--out", out, "--quiet")
     assert r.returncode == 0, r.stderr
     assert (out / "results.csv").is_file() and (out / "report.md").is_file()
+
+
+@pytest.mark.parametrize("options, said", [
+    (["--scheduler", "nonsense"], "cannot use the Dask scheduler at 'nonsense'"),  # no port: ValueError
+    (["--scheduler", " "], "needs the scheduler's address"),
+    (["--serial", "--scheduler", "tcp://127.0.0.1:8786"], "exclude each other"),
+])
+def test_study_bad_scheduler_is_a_clean_usage_error(options, said, tmp_path):
+    pytest.importorskip("distributed", reason="the --scheduler path needs the [cluster] extra")
+    r = run("study", "accuracy", "--quick", "--out", tmp_path / "s", "--quiet", *options)
+    assert r.returncode == 2 and said in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr and not (tmp_path / "s").exists()

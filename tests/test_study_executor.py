@@ -169,3 +169,55 @@ def test_write_csv_union_of_columns(tmp_path):
     assert table[0]["err"] == "0.1" and table[1]["err"] == "" and table[2]["err"] == "inf"
     assert table[1]["error"] == "X: y" and json.loads(table[2]["list"]) == [1, 2]
     assert not list(tmp_path.glob(".*.tmp"))  # the temporary file was moved into place
+
+
+_KILLED_STUDY = """
+import os, sys, time
+from pathlib import Path
+from fem_elastic.study.executor import Case, run_sweep
+
+def nap_and_tell(params):
+    Path(sys.argv[1], f"worker-{os.getpid()}").touch()
+    time.sleep(params["sleep"])
+    return {}
+
+if __name__ == "__main__":
+    run_sweep([Case(f"slow/{k}", {"sleep": 60.0}) for k in range(4)], nap_and_tell, sys.argv[1],
+              workers=2, progress=False)
+"""
+
+
+def test_pool_workers_end_when_the_study_is_killed(tmp_path):
+    """kill -9 of the study's process: its pool workers must not live on (they block on their
+    own task queue and once stayed, idle, forever)."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "study.py"
+    script.write_text(_KILLED_STUDY)
+    parent = subprocess.Popen([sys.executable, str(script), str(tmp_path)])
+    try:
+        deadline = time.monotonic() + 60.0  # two worker processes importing fem_elastic
+        while len(list(tmp_path.glob("worker-*"))) < 2 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        pids = [int(p.name.split("-")[1]) for p in tmp_path.glob("worker-*")]
+        assert len(pids) == 2
+    finally:
+        parent.kill()
+        parent.wait()
+
+    def alive(pid):
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return True
+
+    deadline = time.monotonic() + 10.0  # the workers poll their parent every 0.5 s
+    while any(alive(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    left = [p for p in pids if alive(p)]
+    for p in left:  # do not leak them into the rest of the suite if the test fails
+        os.kill(p, signal.SIGKILL)
+    assert not left, f"pool workers {left} outlived the killed study"
+    assert not (tmp_path / RESULTS_FILE).read_text()  # no case finished, none written

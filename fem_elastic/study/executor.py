@@ -20,7 +20,8 @@ Executors
     a :class:`concurrent.futures.ProcessPoolExecutor` with ``workers`` processes
     (default ``os.cpu_count()``), each limited to one BLAS / OpenMP / numba thread
     so that parallel runs do not oversubscribe the cores (and their wall times
-    stay comparable with a serial run's).
+    stay comparable with a serial run's); a worker ends itself when the process
+    that started it dies (``kill -9``), so a killed study leaves no idle workers.
 ``"serial"``
     every case in this process, in order (debugging, tests, profiles).
 a :class:`concurrent.futures.Executor`
@@ -143,6 +144,38 @@ def _limit_threads() -> None:
             numba.set_num_threads(1)
         except (ValueError, RuntimeError):  # already a single-threaded layer
             pass
+
+
+#: How often (s) a pool worker checks that the process that started it is still alive.
+_PARENT_POLL = 0.5
+
+
+def _exit_with_parent() -> None:
+    """End this (worker) process when its parent dies, e.g. a study killed with ``kill -9``.
+
+    A process-pool worker blocks on its task queue, which it holds open itself (inherited
+    by fork), so it never sees the parent go: without this, each worker of a killed study
+    would live on, idle, forever. A daemon thread polls the parent's pid (re-parenting
+    changes it) and exits the worker at once; the case it was running is lost, as the
+    parent that would have written its row is.
+    """
+    import threading
+
+    parent = os.getppid()
+
+    def watch():
+        while True:
+            time.sleep(_PARENT_POLL)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="fem-elastic-parent-watch", daemon=True).start()
+
+
+def _init_worker() -> None:
+    """Initializer of the default process pool: one BLAS thread, and exit with the parent."""
+    _limit_threads()
+    _exit_with_parent()
 
 
 def _error_text(exc: BaseException) -> str:
@@ -492,7 +525,7 @@ def run_sweep(cases, fn, out_dir, *, executor=None, workers=None, progress=True,
                 finish(_run_case(fn, case))
         elif executor is None or executor == "process":
             n = max(1, min(workers or os.cpu_count() or 1, len(pending)))
-            with cf.ProcessPoolExecutor(max_workers=n, initializer=_limit_threads) as pool:
+            with cf.ProcessPoolExecutor(max_workers=n, initializer=_init_worker) as pool:
                 _drain_futures(pool, pending, fn, finish, failed)
         elif isinstance(executor, cf.Executor):
             _drain_futures(executor, pending, fn, finish, failed)

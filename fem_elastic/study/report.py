@@ -9,8 +9,6 @@ functions that draw.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from pathlib import Path
 
 __all__ = [
@@ -176,19 +174,8 @@ def save_figure(fig, path) -> Path:
 
     The format follows ``path``'s suffix (``.png``, ``.pdf``, ``.svg``).
     """
-    from ..io import _fsync_directory, _new_file_mode
+    from ..io import _atomic_write
 
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fig.savefig(fh, format=path.suffix.lstrip(".") or "png", bbox_inches="tight")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, _new_file_mode(path))  # mkstemp makes it owner-only (0600)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    _fsync_directory(path.parent)
-    return path
+    fmt = path.suffix.lstrip(".") or "png"
+    return _atomic_write(path, lambda tmp: fig.savefig(tmp, format=fmt, bbox_inches="tight"))
