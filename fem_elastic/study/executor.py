@@ -10,7 +10,8 @@ the moment it comes back (one JSON object per line, flushed and fsync'ed). So:
   whose params changed since its row was written runs again, and its new row
   supersedes the old one);
 - a case whose ``fn`` raises is a row with ``status = "error"`` and the error's
-  type and message, not the end of the sweep;
+  type and message, not the end of the sweep; a resume runs it again (the
+  error may have been a bug since fixed), and its new row supersedes the old;
 - every row carries ``id``, the case's params, ``status`` and ``seconds`` (the
   wall time of ``fn``, measured where it ran).
 
@@ -491,10 +492,12 @@ def run_sweep(cases, fn, out_dir, *, executor=None, workers=None, progress=True,
         case = by_id.get(row["id"])
         if case is None:
             continue
-        if _same_params(row, case.params):
-            done[row["id"]] = row
-        else:
+        if not _same_params(row, case.params):
             changed += 1
+        elif row.get("status") == "error":  # a bug or a lost worker: try it again
+            done.pop(row["id"], None)
+        else:
+            done[row["id"]] = row
     pending = [c for c in cases if c.id not in done]
     if done or changed:
         logger.info(
