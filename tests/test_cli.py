@@ -254,14 +254,18 @@ def test_sigint_leaves_readable_files_and_a_clear_message(tmp_path):
         .replace('render = ["gif", "png"]', "render = []")
     )
     out = tmp_path / "long"
+    # A background job of a non-interactive shell (CI runners, `cmd &`) inherits SIGINT ignored,
+    # and Python then leaves it ignored: give the child the default disposition, as a terminal would.
     proc = subprocess.Popen(
         [sys.executable, "-m", "fem_elastic.cli", "run", str(scene), "--out", str(out), "--quiet"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     frames = out / "fem" / "frames"
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and len(list(frames.glob("*.vtu"))) < 5:
         time.sleep(0.1)
+    assert len(list(frames.glob("*.vtu"))) >= 5, "the run wrote no frames within 120 s"
     proc.send_signal(signal.SIGINT)
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 130, stderr
