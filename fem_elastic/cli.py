@@ -349,7 +349,9 @@ def _study(args) -> int:
         if client is not None:
             client.close()
     n_err = sum(1 for r in result.rows if r.get("status") == "error")
-    out(f"study {args.which}: {len(result.rows)} runs in {time.perf_counter() - t0:.1f} s"
+    resumed = len(result.rows) - result.n_run
+    out(f"study {args.which}: {len(result.rows)} cases in {time.perf_counter() - t0:.1f} s"
+        + (f" ({resumed} read back from results.jsonl)" if resumed > 0 else "")
         + (f", {n_err} ended in an error (see results.csv)" if n_err else ""))
     for p in [result.csv_path, result.report_path, *result.figures]:
         out(f"  {p}")
