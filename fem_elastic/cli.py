@@ -42,16 +42,6 @@ class _Out:
             sys.stdout.flush()
 
 
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-    return v
-
-
 def _positive_int(text: str) -> int:
     try:
         v = int(text)
@@ -65,10 +55,13 @@ def _positive_int(text: str) -> int:
 # ---------------------------------------------------------------------------------- run / demo
 
 
-def _tip_vertices(mesh, length: float):
+def _tip_vertices(mesh):
+    """Vertex indices of the beam's free end: the vertices of its boundary "right" (x = L)."""
     import numpy as np
 
-    return np.flatnonzero(mesh.p[0] > length * (1.0 - 1e-9))
+    from .mesh import boundary_facets
+
+    return np.unique(mesh.facets[:, boundary_facets(mesh, "right", what="The demo's tip")])
 
 
 def _print_outcomes(out, outcomes, rendered, out_dir) -> None:
@@ -205,7 +198,7 @@ def _demo(args) -> int:
         E, rho = float(body["E"]), float(body["density"])
         beam = RectangularCantilever(length=L, width=b, height=h, E=E, nu=min(float(body["nu"]), 0.49))
         w_timo = beam.distributed_load_timoshenko(rho * g * b * h)
-        tip = _tip_vertices(run.model.mesh, L)
+        tip = _tip_vertices(run.model.mesh)
         w_end = -float(np.mean(o.trajectory.displacement[-1, tip, 2])) if o.trajectory is not None else float("nan")
         w_static = -float(np.mean(solve_static(run.model).displacement[tip, 2]))
         out(f"{o.name:<10}{run.info.get('body', ''):<40.40}{w_end * 1e3:>10.3f}{w_static * 1e3:>16.3f}"
@@ -278,7 +271,7 @@ def _info(args) -> int:
         from .scene import load_scene
 
         scene = load_scene(path)
-        mesh = scene.build()[0].model.mesh
+        mesh = scene.mesh()
         out(f"{path}: the mesh of scene {scene.name!r}")
     else:
         mesh = load_mesh(path, validate=False)

@@ -57,6 +57,8 @@ import numpy as np
 
 from .elastic_body import ElasticPotential
 from .errors import InvalidParameter
+from .materials.base import _det
+from .mesh import _signed_volumes
 from .springs import SpringPotential
 
 __all__ = ["CellFields", "cell_fields", "von_mises"]
@@ -244,9 +246,7 @@ class CellFields:
         F = self._deformation_gradient(x)  # (3, 3, ne, nq)
         psi = pot.material.psi(F)
         P = pot.material.dpsi_dF(F)
-        J = (F[0, 0] * (F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1])
-             - F[0, 1] * (F[1, 0] * F[2, 2] - F[1, 2] * F[2, 0])
-             + F[0, 2] * (F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]))
+        J = _det(F)
         tau = np.einsum("ikeq,jkeq->ijeq", P, F)  # Kirchhoff stress J sigma = P F^T
         sigma = [0.5 * (tau[i, j] + tau[j, i]) / J for i, j in _SYM]  # its symmetric part / J
         return sigma, J, psi
@@ -268,7 +268,7 @@ class CellFields:
     def _spring_setup(self, space):
         pot = self.potential
         nodes = (space.element_dofs[0:12:3] // 3).astype(np.int64)  # (4, ne) vertex nodes
-        self._nodes = nodes
+        self._tets = nodes.T  # (ne, 4)
         nn = space.ndofs // 3
         ns = pot.edges.shape[1]
         a = np.array([e[0] for e in _TET_EDGES])
@@ -319,12 +319,7 @@ class CellFields:
             per[:-1, col] = c * d[:, a] * d[:, b]
         # sum_e w_et q_e / V_t = sum_e q_e / W_e over the tet's six edges
         tet = np.take(per, self._spring_of, axis=0).sum(axis=0)  # (ne, 7)
-        n = self._nodes
-        x0 = np.take(xp, n[0], axis=0)
-        a, b, c = (np.take(xp, n[k], axis=0) - x0 for k in (1, 2, 3))
-        v = (a[:, 0] * (b[:, 1] * c[:, 2] - b[:, 2] * c[:, 1])
-             + a[:, 1] * (b[:, 2] * c[:, 0] - b[:, 0] * c[:, 2])
-             + a[:, 2] * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0])) / 6.0  # current volume (m^3)
+        v = _signed_volumes(xp, self._tets)  # current volume (m^3)
         # sigma_t = (1 / v_t) sum_e w_et (f (x) l)_e = (V_t / v_t) sum_e (f (x) l)_e / W_e
         scale = self.volume / v
         sigma = [tet[:, k] * scale for k in range(6)]

@@ -710,8 +710,7 @@ def read_series(run_dir) -> SeriesData:
         if tets is None:
             tets = frame_tets
             points_ref = points - pdata["displacement"]
-        elif frame_tets.shape != tets.shape or not np.array_equal(frame_tets, tets) \
-                or points.shape != points_ref.shape:
+        elif not np.array_equal(frame_tets, tets) or points.shape != points_ref.shape:
             logger.warning("%s: frame has a different grid from the first frame; skipped", path)
             continue
         times.append(time)

@@ -178,6 +178,8 @@ class SeriesWriter:
         ``(time in s, file relative to run_dir)`` of every frame written.
     seconds_output : float
         Wall time spent writing so far (s): fields, VTU, PVD and summary.
+    steps_taken : int
+        Steps the callback has seen so far.
 
     Examples
     --------
@@ -229,8 +231,6 @@ class SeriesWriter:
         self._last_fields: dict | None = None
         self._last_state = None  # the last state seen (written or not) and its step
         self._last_step = -1
-        self._written_t: float | None = None  # time of the last frame written
-        self._steps_seen = 0
         self._start = time.perf_counter()
         self.finished = False
         self.run_dir.mkdir(parents=True, exist_ok=True)
@@ -247,6 +247,11 @@ class SeriesWriter:
             # the PVD first: from then on no reader sees a half-removed series as whole
             for p in stale:
                 p.unlink(missing_ok=True)
+
+    @property
+    def steps_taken(self) -> int:
+        """Steps the callback has seen so far (int)."""
+        return self._last_step + 1
 
     # frames ---------------------------------------------------------------------------
     def write_state(self, state) -> Path:
@@ -277,7 +282,6 @@ class SeriesWriter:
         write_pvd(self.run_dir / PVD_NAME, entries)
         self.frames = entries  # only now: a failed write leaves the series as it was
         self._last_fields = fields
-        self._written_t = float(state.t)
         if self._last_state is None:
             self._last_state = state
         self.seconds_output += time.perf_counter() - t0
@@ -294,7 +298,6 @@ class SeriesWriter:
             The state after it.
         """
         self._last_state, self._last_step = state, int(k)
-        self._steps_seen = int(k) + 1
         last = self.n_steps is not None and k == self.n_steps - 1
         if (k + 1) % self.every == 0 or last:
             self.write_state(state)
@@ -334,7 +337,7 @@ class SeriesWriter:
             final = getattr(trajectory, "final_state", None)
         if final is None:
             final = self._last_state
-        if final is not None and (self._written_t is None or float(final.t) != self._written_t):
+        if final is not None and (not self.frames or float(final.t) != self.frames[-1][0]):
             self.write_state(final)
         t0 = time.perf_counter()
         summary = self._summary(trajectory, final, status, message, extra)
@@ -355,7 +358,7 @@ class SeriesWriter:
         if trajectory is not None:
             out.update(trajectory.summary())
         else:  # interrupted: what the writer itself saw
-            out.update({"steps": self._steps_seen,
+            out.update({"steps": self.steps_taken,
                         "t_end": None if final is None else float(final.t),
                         "wall_time": time.perf_counter() - self._start})
             if final is not None:

@@ -61,7 +61,7 @@ import sys
 import time
 from collections.abc import Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -382,11 +382,8 @@ def _every(run: _Run, every: int) -> _Run:
     keep = np.arange(0, len(run.times), every)
     if keep[-1] != len(run.times) - 1:
         keep = np.append(keep, len(run.times) - 1)
-    return _Run(
-        title=run.title, times=run.times[keep], points_ref=run.points_ref,
-        displacement=run.displacement[keep], faces=run.faces, values=run.values[keep],
-        association=run.association, shown=run.shown, ground_z=run.ground_z, status=run.status,
-    )
+    return replace(run, times=run.times[keep], displacement=run.displacement[keep],
+                   values=run.values[keep])
 
 
 # --- the plotter -------------------------------------------------------------------------------

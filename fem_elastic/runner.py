@@ -105,18 +105,12 @@ def run_variant(run, out_dir, *, progress: bool = False) -> RunOutcome:
 
     run_dir = Path(out_dir) / run.name
     writer = SeriesWriter(run.model, run_dir, every=run.record_every, info=run.info)
-    steps_done = [0]
-
-    def callback(k, state):
-        steps_done[0] = k + 1
-        writer.callback(k, state)
-
     t0 = time.perf_counter()
     writer.write_state(run.state)
     try:
         traj = simulate(
             run.model, run.integrator, run.dt, steps=run.steps, state=run.state,
-            record_every=run.record_every, progress=progress, callback=callback,
+            record_every=run.record_every, progress=progress, callback=writer.callback,
         )
     except Diverged as err:
         elapsed = time.perf_counter() - t0
@@ -126,7 +120,7 @@ def run_variant(run, out_dir, *, progress: bool = False) -> RunOutcome:
         return RunOutcome(run.name, run_dir, "diverged", msg, err.trajectory, elapsed, writer.seconds_output, run)
     except KeyboardInterrupt:
         elapsed = time.perf_counter() - t0
-        msg = (f"interrupted after {steps_done[0]} of {run.steps} steps; the frames written so far in "
+        msg = (f"interrupted after {writer.steps_taken} of {run.steps} steps; the frames written so far in "
                f"{run_dir} are complete and readable")
         writer.finish(None, status="interrupted", message=msg)
         raise SceneInterrupted(

@@ -557,6 +557,25 @@ class Scene:
         self._check_boundaries(mesh)
         return [self._run(name, mesh, mesh_info) for name in names]
 
+    def mesh(self):
+        """The scene's mesh (points in m), checked against the boundaries the scene names.
+
+        What :meth:`build` gives every run, without building a model.
+
+        Returns
+        -------
+        skfem.MeshTet
+
+        Raises
+        ------
+        SceneError
+            As :meth:`build`: a mesh file that cannot be read, a boundary the
+            mesh does not have, a vertex index out of range.
+        """
+        mesh, _ = self._mesh()
+        self._check_boundaries(mesh)
+        return mesh
+
     def _mesh(self):
         m = self.spec["mesh"]
         from .mesh import beam_mesh
