@@ -95,10 +95,12 @@ def test_resume_runs_only_missing_cases(tmp_path):
     CALLS.clear()
     rows = run_sweep(CASES, square, tmp_path, executor="serial", progress=False)
     assert CALLS == [3, 4, 5]  # the first three came from results.jsonl
+    assert rows.n_run == 3
     _check_rows(rows)
     CALLS.clear()
     again = run_sweep(CASES, square, tmp_path, executor="serial", progress=False)
     assert CALLS == [4]  # only the case that errored is tried again (it may have been a bug)
+    assert again.n_run == 1  # counted although its id was already in results.jsonl
     assert _comparable(again) == _comparable(rows)  # all but the measured seconds
     assert len((tmp_path / RESULTS_FILE).read_text().splitlines()) == len(CASES) + 1
 
@@ -121,6 +123,7 @@ def test_resume_reruns_cases_whose_params_changed(tmp_path):
     CALLS.clear()
     rows = run_sweep(changed, square, tmp_path, executor="serial", progress=False)
     assert CALLS == [7] and rows[1]["y"] == 49
+    assert rows.n_run == 1  # the changed case, whose id was already in results.jsonl
     assert read_results(tmp_path)[-1]["y"] == 49  # the new row supersedes the old one
 
 

@@ -78,29 +78,28 @@ Examples
 
 from __future__ import annotations
 
-import importlib.util
 import logging
 import math
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..analytic import RectangularCantilever, elastica_tip
 from ..errors import InvalidParameter
-from .executor import Case, read_results, run_sweep, write_csv
+from .executor import Case, run_sweep
 from .report import (
     MARKERS,
+    StudyResult,
     draw_pareto,
     fastest_within,
+    finish_study,
     finite,
     fmt_float,
     fmt_pct,
     fmt_seconds,
     markdown_table,
     pareto_front,
-    save_figure,
 )
 
 __all__ = [
@@ -157,32 +156,6 @@ AMPLITUDE = 1.0e-4  # m: tip amplitude of the modal release. L / 10^4 keeps the 
 # single mode to ~1e-5 (their quadratic terms couple other modes in proportion to the amplitude)
 ALPHA_RELEASE = 1.0  # the linearized problem's initial bend: tip deflection 0.30 L, tip rotation 26 degrees
 SPRING_NU = 0.25  # a spring network's own Poisson ratio (Cauchy relation); van Gelder ignores nu anyway
-
-
-@dataclass
-class StudyResult:
-    """What :func:`run_accuracy_study` wrote.
-
-    Attributes
-    ----------
-    rows : list of dict
-        One per case (see the module docstring for the columns).
-    csv_path, report_path : pathlib.Path
-        ``results.csv`` and ``report.md``.
-    figures : list of pathlib.Path
-        ``error_vs_time.png``.
-    n_run : int
-        Cases run by this call (the others came from ``results.jsonl``).
-    wall_time : float
-        Wall time of this call (s).
-    """
-
-    rows: list
-    csv_path: Path
-    report_path: Path
-    figures: list = field(default_factory=list)
-    n_run: int = 0
-    wall_time: float = 0.0
 
 
 # --- the sweep ----------------------------------------------------------------------------
@@ -318,10 +291,18 @@ def _body(p):
     return fe.ElasticBody(materials[p["body"]](E=p["E"], nu=p["nu"]), order=p["order"])
 
 
-def _model(p, **loads):
+def _model(p, mesh=None, **loads):
+    """The case's clamped beam under ``loads``; on ``mesh`` when given (a second model of the same beam)."""
     fe = _fe()
-    mesh = fe.beam_mesh(p["length"], p["width"], p["height"], cells=tuple(p["cells"]))
+    if mesh is None:
+        mesh = fe.beam_mesh(p["length"], p["width"], p["height"], cells=tuple(p["cells"]))
     return fe.Model(mesh, p["density"], _body(p), fixed="left", **loads)
+
+
+def _elastica_traction(p, beam) -> tuple[float, float, float]:
+    """The end-face traction (Pa) of the tip load P = alpha E I / L^2 (N), spread uniformly, downward."""
+    P = p["alpha"] * p["E"] * beam.second_moment / p["length"] ** 2
+    return (0.0, 0.0, -P / beam.area)
 
 
 def _tip_weights(model, axis: int) -> np.ndarray:
@@ -368,16 +349,14 @@ def _result(value, reference, reference_name, quantity, seconds_solve, **extra) 
 def _static(p) -> dict:
     fe = _fe()
     beam = _beam(p)
-    area = p["width"] * p["height"]
     if p["problem"] == "static_tip":
         model = _model(p, traction={"right": (0.0, 0.0, p["traction"])})
-        reference, name = beam.tip_load_timoshenko(-p["traction"] * area), "Timoshenko"
+        reference, name = beam.tip_load_timoshenko(-p["traction"] * beam.area), "Timoshenko"
     elif p["problem"] == "self_weight":
         model = _model(p, gravity=(0.0, 0.0, -p["gravity"]))
-        reference, name = beam.distributed_load_timoshenko(p["density"] * p["gravity"] * area), "Timoshenko"
+        reference, name = beam.distributed_load_timoshenko(p["density"] * p["gravity"] * beam.area), "Timoshenko"
     else:  # large_deflection: P = alpha E I / L^2 as a uniform traction on the end face
-        P = p["alpha"] * p["E"] * beam.second_moment / p["length"] ** 2
-        model = _model(p, traction={"right": (0.0, 0.0, -P / area)})
+        model = _model(p, traction={"right": _elastica_traction(p, beam)})
         d, s = elastica_tip(p["alpha"])
         reference, name = d * p["length"], "elastica"
     res, seconds, calls = _timed(lambda: fe.solve_static(model, linear_solver=fe.DirectSolver()))
@@ -526,10 +505,8 @@ def _linearized(p) -> dict:
     """One scheme (or the reference) from the large release; histories for the report's comparison."""
     fe = _fe()
     beam = _beam(p)
-    area = p["width"] * p["height"]
-    P = p["alpha"] * p["E"] * beam.second_moment / p["length"] ** 2
-    bent = fe.solve_static(_model(p, traction={"right": (0.0, 0.0, -P / area)}))
     model = _model(p)
+    bent = fe.solve_static(_model(p, model.mesh, traction={"right": _elastica_traction(p, beam)}))
     weights = [_tip_weights(model, 0), _tip_weights(model, 2)]
     state = fe.State(bent.x, np.zeros(model.ndofs), 0.0)
     f_ref = beam.first_bending_frequency(p["density"])
@@ -1250,20 +1227,10 @@ def run_accuracy_study(out_dir, *, quick: bool = False, executor=None, workers=N
     cases = accuracy_cases(quick)
     if _case_filter is not None:  # tests: a subset of the sweep
         cases = [c for c in cases if _case_filter(c)]
-    before = {r["id"] for r in read_results(out_dir)} if (out_dir / "results.jsonl").exists() else set()
     rows = run_sweep(cases, run_accuracy_case, out_dir, executor=executor, workers=workers, progress=progress,
                      desc="accuracy study")
-    n_run = sum(c.id not in before for c in cases)
     _postprocess(rows)
-    public = _public(rows)
-    csv_path = write_csv(public, out_dir / "results.csv")
-    figures = []
-    if importlib.util.find_spec("matplotlib") is None:
-        logger.warning("matplotlib is not installed (the [study] extra): no error_vs_time.png")
-    else:
-        figures.append(save_figure(plot_error_vs_time(rows), out_dir / "error_vs_time.png"))
-    wall = time.perf_counter() - t0
-    report = write_report(public, out_dir / "report.md", quick=quick, wall_time=wall, n_run=n_run)
-    logger.info("accuracy study: %d runs (%d new) in %.1f s; report %s", len(rows), n_run, wall, report)
-    return StudyResult(rows=rows, csv_path=csv_path, report_path=report, figures=figures, n_run=n_run,
-                       wall_time=wall)
+    return finish_study("accuracy study", rows, out_dir, t0=t0, n_run=rows.n_run, quick=quick,
+                        table=_public(rows),
+                        figures=lambda: [(plot_error_vs_time(rows), "error_vs_time.png")],
+                        write_report=write_report)

@@ -56,7 +56,7 @@ from pathlib import Path
 
 from ..errors import FemElasticError, InvalidParameter
 
-__all__ = ["Case", "SweepIncomplete", "run_sweep", "read_results", "write_csv", "RESULTS_FILE"]
+__all__ = ["Case", "SweepIncomplete", "SweepRows", "run_sweep", "read_results", "write_csv", "RESULTS_FILE"]
 
 logger = logging.getLogger(__name__)
 
@@ -117,6 +117,22 @@ class SweepIncomplete(FemElasticError, RuntimeError):
         super().__init__(message)
         self.failed = failed
         self.rows = rows
+
+
+class SweepRows(list):
+    """The rows :func:`run_sweep` returns: a list, plus how many of them this call computed.
+
+    Attributes
+    ----------
+    n_run : int
+        Cases whose function ran in this call (new cases, cases whose params
+        changed and cases that had ended in an error); the other rows were read
+        back from ``results.jsonl``.
+    """
+
+    def __init__(self, rows=(), n_run: int = 0):
+        super().__init__(rows)
+        self.n_run = n_run
 
 
 # --- the wrapped call (runs on the worker) -------------------------------------------------
@@ -423,7 +439,7 @@ def _progress_bar(progress: bool, total: int, initial: int, desc: str):
     return tqdm(total=total, initial=initial, desc=desc or "cases", unit="case")
 
 
-def run_sweep(cases, fn, out_dir, *, executor=None, workers=None, progress=True, desc="") -> list[dict]:
+def run_sweep(cases, fn, out_dir, *, executor=None, workers=None, progress=True, desc="") -> SweepRows:
     """Run ``fn`` on every case not yet in ``out_dir/results.jsonl`` and append each row as it finishes.
 
     Parameters
@@ -449,10 +465,11 @@ def run_sweep(cases, fn, out_dir, *, executor=None, workers=None, progress=True,
 
     Returns
     -------
-    list of dict
-        One row per case, in the order of ``cases`` (rows from an earlier,
-        interrupted run included). Every row has ``id``, the params, ``status``
-        and ``seconds`` (s, wall time of ``fn`` where it ran).
+    SweepRows
+        A list of dict: one row per case, in the order of ``cases`` (rows from
+        an earlier, interrupted run included). Every row has ``id``, the params,
+        ``status`` and ``seconds`` (s, wall time of ``fn`` where it ran). Its
+        ``n_run`` is how many of them this call computed.
 
     Raises
     ------
@@ -474,8 +491,8 @@ def run_sweep(cases, fn, out_dir, *, executor=None, workers=None, progress=True,
     ...     again = run_sweep(cases, _square, tmp, executor="serial", progress=False)  # resumes: runs none
     >>> [(r["id"], r["y"], r["status"]) for r in rows]
     [('x0', 0, 'ok'), ('x1', 1, 'ok'), ('x2', 4, 'ok')]
-    >>> [r["seconds"] for r in again] == [r["seconds"] for r in rows]
-    True
+    >>> [r["seconds"] for r in again] == [r["seconds"] for r in rows], rows.n_run, again.n_run
+    (True, 3, 0)
     """
     cases = list(cases)
     ids = [c.id for c in cases]
@@ -508,12 +525,15 @@ def run_sweep(cases, fn, out_dir, *, executor=None, workers=None, progress=True,
         logger.info("%s: %d cases to run", path, len(pending))
 
     rows = dict(done)
+    n_run = 0
     failed: dict[str, str] = {}
     bar = _progress_bar(progress, len(cases), len(done), desc) if pending else None
     appender = _Appender(path)
 
     def finish(row: dict) -> None:
+        nonlocal n_run
         appender.write(row)
+        n_run += 1
         rows[row["id"]] = row
         if row.get("status") == "error":
             logger.warning("case %s: %s", row["id"], row.get("error"))
@@ -554,7 +574,7 @@ def run_sweep(cases, fn, out_dir, *, executor=None, workers=None, progress=True,
             failed=failed,
             rows=ordered,
         )
-    return ordered
+    return SweepRows(ordered, n_run)
 
 
 def _drain_futures(pool: cf.Executor, pending, fn, finish, failed) -> None:

@@ -1,4 +1,5 @@
-"""Helpers shared by the studies' reports: Pareto fronts, markdown tables, number formats, figures.
+"""Helpers shared by the studies' reports: Pareto fronts, markdown tables, number formats, figures,
+and :func:`finish_study`, what every study does once its sweep has run.
 
 Nothing here knows about a particular study: rows are dicts (as
 :func:`fem_elastic.study.executor.run_sweep` returns them) and the helpers
@@ -8,10 +9,16 @@ functions that draw.
 
 from __future__ import annotations
 
+import importlib.util
+import logging
 import math
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 __all__ = [
+    "StudyResult",
+    "finish_study",
     "finite",
     "pareto_front",
     "fastest_within",
@@ -23,6 +30,8 @@ __all__ = [
     "save_figure",
     "MARKERS",
 ]
+
+logger = logging.getLogger(__name__)
 
 #: Marker styles, one per method/body, in a fixed order (readable in black and white too).
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "<", ">", "*")
@@ -179,3 +188,76 @@ def save_figure(fig, path) -> Path:
     path = Path(path)
     fmt = path.suffix.lstrip(".") or "png"
     return _atomic_write(path, lambda tmp: fig.savefig(tmp, format=fmt, bbox_inches="tight"))
+
+
+@dataclass
+class StudyResult:
+    """What a study (:func:`fem_elastic.study.run_accuracy_study`, ``run_stability_study``) wrote.
+
+    Attributes
+    ----------
+    rows : list of dict
+        One per case (see the study's module docstring for the columns).
+    csv_path, report_path : pathlib.Path
+        ``results.csv`` and ``report.md``.
+    figures : list of pathlib.Path
+        The PNG figures written (none without matplotlib).
+    n_run : int
+        Cases run by this call (the others came from ``results.jsonl``).
+    wall_time : float
+        Wall time of this call (s).
+    """
+
+    rows: list
+    csv_path: Path
+    report_path: Path
+    figures: list = field(default_factory=list)
+    n_run: int = 0
+    wall_time: float = 0.0
+
+
+def finish_study(name, rows, out_dir, *, t0: float, n_run: int, quick: bool, table, figures,
+                 write_report) -> StudyResult:
+    """Write a swept study's ``results.csv``, figures and ``report.md``; return its :class:`StudyResult`.
+
+    Parameters
+    ----------
+    name : str
+        The study, for the log (e.g. ``"accuracy study"``).
+    rows : list of dict
+        The sweep's rows (``StudyResult.rows``).
+    out_dir : pathlib.Path
+        The study's directory (it exists: the sweep wrote ``results.jsonl`` there).
+    t0 : float
+        ``time.perf_counter()`` when the call started (s).
+    n_run : int
+        Cases the sweep ran in this call (``SweepRows.n_run``).
+    quick : bool
+        Passed to ``write_report``.
+    table : list of dict
+        The rows as written to ``results.csv`` and given to ``write_report``.
+    figures : callable
+        ``figures() -> [(matplotlib Figure or None, file name), ...]``, called only
+        when matplotlib is installed; a None figure is skipped.
+    write_report : callable
+        ``write_report(table, path, *, quick, wall_time, n_run) -> Path``.
+
+    Returns
+    -------
+    StudyResult
+    """
+    from .executor import write_csv
+
+    csv_path = write_csv(table, out_dir / "results.csv")
+    written = []
+    if importlib.util.find_spec("matplotlib") is None:
+        logger.warning("matplotlib is not installed (the [study] extra): the %s draws no figures", name)
+    else:
+        for fig, filename in figures():
+            if fig is not None:
+                written.append(save_figure(fig, out_dir / filename))
+    wall = time.perf_counter() - t0
+    report = write_report(table, out_dir / "report.md", quick=quick, wall_time=wall, n_run=n_run)
+    logger.info("%s: %d cases (%d run by this call) in %.1f s; report %s", name, len(rows), n_run, wall, report)
+    return StudyResult(rows=rows, csv_path=csv_path, report_path=report, figures=written, n_run=n_run,
+                       wall_time=wall)

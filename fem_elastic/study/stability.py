@@ -87,11 +87,12 @@ import numpy as np
 
 from .. import integrators as _integrators
 from ..errors import Diverged, FemElasticError, InvalidMesh, InvalidParameter, NotConverged
+from ..mesh import _signed_volumes
 from ..modal import critical_time_step, max_frequency
 from ..simulate import simulate
 from . import stability_cases as sc
-from .accuracy import StudyResult
-from .executor import Case, read_results, run_sweep, write_csv
+from .executor import Case, run_sweep
+from .report import StudyResult, finish_study
 
 __all__ = [
     "INTEGRATORS",
@@ -285,7 +286,7 @@ def _scene(params):
 def _min_J(model, x, tets, volumes0):
     """Smallest V / V_0 over the tets at positions x (dimensionless; < 0: inverted)."""
     p = model.to_vertices(x)
-    return float(np.min(sc._volumes(p, tets) / volumes0))
+    return float(np.min(_signed_volumes(p, tets) / volumes0))
 
 
 def _classify(err) -> str:
@@ -321,7 +322,7 @@ def _simulate(scene, integrator_name, dt, steps, work_limit=WORK_LIMIT):
     model, state = scene.model, scene.state
     integ = _integrator(integrator_name)
     tets = np.asarray(model.mesh.t).T
-    volumes0 = sc._volumes(np.asarray(model.mesh.p, dtype=float).T, tets)
+    volumes0 = _signed_volumes(np.asarray(model.mesh.p, dtype=float).T, tets)
     jmin = _min_J(model, state.x, tets, volumes0)
     umax = float(np.abs(state.x - model.X).max())
     work = 0
@@ -1152,25 +1153,11 @@ def run_stability_study(out_dir, *, quick: bool = False, executor=None, workers=
     cases = study_cases(quick)
     if _case_filter is not None:  # tests: a subset of the study
         cases = [c for c in cases if _case_filter(c)]
-    before = {r["id"] for r in read_results(out_dir)}
     rows = run_sweep(cases, run_stability_case, out_dir, executor=executor, workers=workers, progress=progress,
                      desc="stability study")
-    n_run = sum(c.id not in before for c in cases)
-    csv_path = write_csv(rows, out_dir / "results.csv")
-    figures = []
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        log.warning("matplotlib is not installed (the [study] extra): no stability_map.png / extreme.png")
-    else:
-        from .report import save_figure
 
-        figures.append(save_figure(plot_stability_map(rows), out_dir / "stability_map.png"))
-        fig = plot_extreme(rows)
-        if fig is not None:
-            figures.append(save_figure(fig, out_dir / "extreme.png"))
-    wall = time.perf_counter() - t0
-    report = write_report(rows, out_dir / "report.md", quick=quick, wall_time=wall, n_run=n_run)
-    log.info("stability study: %d cases (%d run now) in %.1f s; report %s", len(rows), n_run, wall, report)
-    return StudyResult(rows=rows, csv_path=csv_path, report_path=report, figures=figures, n_run=n_run,
-                       wall_time=wall)
+    def figures():
+        return [(plot_stability_map(rows), "stability_map.png"), (plot_extreme(rows), "extreme.png")]
+
+    return finish_study("stability study", rows, out_dir, t0=t0, n_run=rows.n_run, quick=quick, table=rows,
+                        figures=figures, write_report=write_report)

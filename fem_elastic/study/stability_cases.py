@@ -52,7 +52,7 @@ from ..driven import Translate, Twist
 from ..elastic_body import ElasticBody
 from ..errors import InvalidParameter
 from ..materials import Corotated, LinearElastic, NeoHookean, StVK
-from ..mesh import beam_mesh
+from ..mesh import _signed_volumes, beam_mesh
 from ..model import Model
 from ..springs import SPRING_POISSON_RATIO, MassSpring
 from ..state import State
@@ -106,15 +106,12 @@ class Scene:
         cantilever runs a fixed number of steps instead.
     t_free : float
         Time (s) from which no boundary is driven: energy drift is measured from here.
-    size : float
-        Largest extent of the body (m), for the energy scale.
     """
 
     model: Model
     state: State
     duration: float
     t_free: float = 0.0
-    size: float = 1.0
 
 
 def make_body(body: str, E: float, nu: float):
@@ -172,7 +169,7 @@ def cantilever(body: str, E: float, nu: float, *, kick: float = 1e-3, seed: int 
     length = float(np.ptp(mesh.p[0]))
     target = kick * model.total_mass * model.gravity_magnitude * length
     v = v * math.sqrt(target / model.kinetic_energy(v))
-    return Scene(model, State.rest(model, velocity=model.to_vertices(v)), duration=math.inf, size=length)
+    return Scene(model, State.rest(model, velocity=model.to_vertices(v)), duration=math.inf)
 
 
 def inverted(body: str, E: float, nu: float) -> Scene:
@@ -196,7 +193,7 @@ def inverted(body: str, E: float, nu: float) -> Scene:
         u[end, 2] = height - 2.0 * X[end, 2]  # z -> height - z
         return u
 
-    return Scene(model, State.rest(model, displacement=flip), duration=0.5, size=1.0)
+    return Scene(model, State.rest(model, displacement=flip), duration=0.5)
 
 
 def _cube():
@@ -208,7 +205,7 @@ def crush(body: str, E: float, nu: float) -> Scene:
     release = 0.25
     model = Model(_cube(), density=DENSITY, body=make_body(body, E, nu), fixed="bottom",
                   driven={"top": Translate((0.0, 0.0, -0.09), duration=0.2, release=release)})
-    return Scene(model, State.rest(model), duration=0.5, t_free=release, size=0.1)
+    return Scene(model, State.rest(model), duration=0.5, t_free=release)
 
 
 def twist(body: str, E: float, nu: float) -> Scene:
@@ -216,7 +213,7 @@ def twist(body: str, E: float, nu: float) -> Scene:
     release = 0.6
     model = _cantilever_model(beam_mesh(cells=(6, 1, 1)), body, E, nu,
                               driven={"right": Twist(4.0 * math.pi, duration=0.5, release=release)})
-    return Scene(model, State.rest(model), duration=1.0, t_free=release, size=1.0)
+    return Scene(model, State.rest(model), duration=1.0, t_free=release)
 
 
 def drop(body: str, E: float, nu: float, *, speed: float = 20.0) -> Scene:
@@ -224,7 +221,7 @@ def drop(body: str, E: float, nu: float, *, speed: float = 20.0) -> Scene:
     cube = _cube().translated((0.0, 0.0, 0.05))
     model = Model(cube, density=DENSITY, body=make_body(body, E, nu), gravity=_GRAVITY,
                   ground=Ground(z=0.0))
-    return Scene(model, State.rest(model, velocity=(0.0, 0.0, -speed)), duration=0.25, size=0.1)
+    return Scene(model, State.rest(model, velocity=(0.0, 0.0, -speed)), duration=0.25)
 
 
 def sliver_mesh(relative_volume: float, n_slivers: int = 3):
@@ -276,16 +273,11 @@ def sliver_mesh(relative_volume: float, n_slivers: int = 3):
     return dataclasses.replace(mesh, doflocs=p.T.copy())
 
 
-def _volumes(p, t):
-    a, b, c = (p[t[:, k]] - p[t[:, 0]] for k in (1, 2, 3))
-    return np.einsum("ij,ij->i", np.cross(a, b), c) / 6.0
-
-
 def _flattening_move(p, t, v):
     """The shortest move of vertex v onto the plane of the opposite face of one of its tets
     that leaves every other tet of its star with volume >= 0 (m, (3,))."""
     star = np.flatnonzero(np.any(t == v, axis=1))
-    v0 = _volumes(p, t[star])
+    v0 = _signed_volumes(p, t[star])
     best = None
     for e in star:
         face = [w for w in t[e] if w != v]
@@ -295,7 +287,7 @@ def _flattening_move(p, t, v):
         q = p.copy()
         q[v] += move
         # round-off: a tet sharing the plane is flattened too, to ~eps * V
-        if _volumes(q, t[star]).min() >= -1e-12 * v0.max():
+        if _signed_volumes(q, t[star]).min() >= -1e-12 * v0.max():
             if best is None or np.linalg.norm(move) < np.linalg.norm(best):
                 best = move
     if best is None:  # pragma: no cover - every axis vertex of beam_mesh has one
