@@ -225,25 +225,10 @@ class CellFields:
         return out
 
     # FEM ---------------------------------------------------------------------------
-    def _deformation_gradient(self, x):
-        """F ``(3, 3, ne, nq)``: the space's own contraction, done without einsum's path search.
-
-        Same sum as :meth:`Discretization.deformation_gradient` (F = I + sum_a u_a (x) dN_a),
-        asks einsum to optimize the path each call: on 10k P1 tets that costs
-        5x the contraction itself.
-        """
-        space = self.potential.space
-        ue = np.take(x - space.X, space.element_dofs).reshape(space.nloc, 3, -1)
-        # einsum's optimized path pays off for P2 (10 nodes x 4 points), not for P1
-        F = np.einsum("aie,ajeq->ijeq", ue, space.dN, optimize=space.dN.shape[3] > 1)
-        for i in range(3):
-            F[i, i] += 1.0
-        return F
-
     def _fem_parts(self, x):
         """Cauchy stress (six ``(ne, nq)`` components), J and psi at the quadrature points."""
         pot = self.potential
-        F = self._deformation_gradient(x)  # (3, 3, ne, nq)
+        F = pot.F(x)  # (3, 3, ne, nq)
         psi = pot.material.psi(F)
         P = pot.material.dpsi_dF(F)
         J = _det(F)
