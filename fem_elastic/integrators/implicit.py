@@ -257,13 +257,16 @@ class LinearizedImplicitEuler(_Implicit):
         G = IncrementalPotential(model, state.x + h * state.v, h, self.mass, state.x)
         x0 = state.x.copy()
         x0[dofs] = xc
-        if self._warped(model) is None and not math.isfinite(model.energy(x0)):
-            return None, _INVERTED_AT_START  # the tangent is not defined there
         t0 = time.perf_counter()
         # the model's terms, with the warped stiffness in place of the body's for stiffness warping
-        model_terms = model.linearize(x0, project=self.project, body=self._warped(model))
-        g, H = G.linearize(x0, project=self.project, body=model_terms)
+        try:
+            model_terms = model.linearize(x0, project=self.project, body=self._warped(model))
+            g, H = G.linearize(x0, project=self.project, body=model_terms)
+        except np.linalg.LinAlgError:  # the PSD projection of a tangent with NaN in it
+            return None, _INVERTED_AT_START
         stats.seconds["linearize"] += time.perf_counter() - t0
+        if not (np.isfinite(g).all() and np.isfinite(H.data).all()):
+            return None, _INVERTED_AT_START  # e.g. log J of an inverted Neo-Hookean element
         stats.gradient_evaluations += 1
         g = np.where(free, g, 0.0)
         solve = NewtonResult(x=x0, converged=False, iterations=1)  # collects the solve's figures
