@@ -446,7 +446,7 @@ class BuiltRun:
     output : dict
         ``vtu`` (bool), ``render`` (list of "mp4", "gif", "png"),
         ``color_by`` ("von_mises" | "displacement"), ``size`` ((width, height) px),
-        ``fps`` (frames/s).
+        ``fps`` (frames/s), ``checkpoint_every`` (steps; 0 for checkpoints only on Ctrl-C).
     info : dict
         Plain values describing the run, for ``summary.json``.
     """
@@ -707,7 +707,8 @@ class Scene:
             ("initial", "velocity"), State.rest, model, velocity=tuple(initial["velocity"]))
         out = spec["output"]
         output = {"vtu": out["vtu"], "render": list(out["render"]), "color_by": out["color_by"],
-                  "size": tuple(out["size"]), "fps": out["fps"]}
+                  "size": tuple(out["size"]), "fps": out["fps"],
+                  "checkpoint_every": out["checkpoint_every"]}
         return BuiltRun(
             name=name, model=model, integrator=integrator, dt=dt, steps=steps, state=state,
             record_every=out["every"], output=output,

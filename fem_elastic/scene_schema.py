@@ -881,6 +881,8 @@ SCENE_FILE = Table(
         ), "Time stepping: ceil(duration / dt) steps."), REQUIRED, doc="time stepping"),
         Key("output", Table("output", (
             Key("every", Integer(ge=1), 1, doc="record a frame every this many steps"),
+            Key("checkpoint_every", Integer(ge=0), 0,
+                doc="write a checkpoint every this many steps, for `fem-elastic run --resume` (0: only on Ctrl-C)"),
             Key("vtu", Boolean(), True, doc="keep the VTU frames and the PVD series (false: only summary.json and the renders)"),
             Key("render", Array(Choice(RENDER_FORMATS), None, 'array of "mp4" | "gif" | "png"'),
                 ["mp4"], doc="movies and pictures to render ([] for none)"),
@@ -981,7 +983,8 @@ def _key_lines(table: Table, indent: str) -> list[str]:
             typ = key.type.label
         if key.unit:
             typ += f", {key.unit}"
-        lines.append(f"{indent}{key.name:<13}{typ}; {_default_text(key)}")
+        name = f"{key.name:<12} "  # a longer name still keeps a space before its type
+        lines.append(f"{indent}{name}{typ}; {_default_text(key)}")
         cond = ""
         if key.when:
             cond = " (if " + ", ".join(f"{k} = {' | '.join(_toml(v) for v in vals)}"

@@ -200,7 +200,7 @@ def test_defaults_are_filled():
     assert spec["loads"] == {"gravity": None, "traction": {}, "driven": []}
     assert spec["ground"] is None and spec["damping"] is None and spec["initial"] is None
     assert spec["output"] == {"every": 1, "vtu": True, "render": ["mp4"], "color_by": "von_mises",
-                              "size": [960, 540], "fps": 30}
+                              "size": [960, 540], "fps": 30, "checkpoint_every": 0}
     assert spec["compare"] == []
     springs = parse_scene(BASE).spec["compare"][0]["body"]
     assert springs == {"type": "springs", "name": "springs", "E": 1e6, "nu": 0.25, "density": 1000.0,
@@ -310,7 +310,7 @@ def test_built_run_fields():
     assert run.dt == 0.3 and run.steps == 4  # ceil(1.0 / 0.3)
     assert run.record_every == 2
     assert run.output == {"vtu": True, "render": ["gif", "png"], "color_by": "von_mises",
-                          "size": (320, 240), "fps": 30}
+                          "size": (320, 240), "fps": 30, "checkpoint_every": 0}
     info = run.info
     assert (info["scene"], info["variant"], info["E"], info["nu"], info["order"]) == ("t", "fem", 1e6, 0.3, 1)
     assert info["mesh"]["kind"] == "beam" and info["mesh"]["cells"] == [4, 1, 1]

@@ -4,7 +4,10 @@ An integrator is a small object with one method, ``step(model, state, dt)
 -> State``. It never stores physics (that is the Model's) and keeps only
 its settings, the statistics of its last step (``last_stats``) and, for
 Newmark, the acceleration of the state it produced last (a cache that is
-recomputed whenever it does not match the state given).
+recomputed whenever it does not match the state given). What a scheme
+remembers between steps is saved in checkpoints
+(:meth:`Integrator.checkpoint_state`, :meth:`Integrator.restore_state`) so
+that a resumed run repeats the uninterrupted one bit for bit.
 
 For the stability analysis, each scheme also gives its one-step map on the
 damped modal oscillator ``q'' + 2 zeta omega q' + omega^2 q = 0``
@@ -63,6 +66,9 @@ class StepStats:
         Times the step was halved because Newton did not converge.
     substeps : int
         Sub-steps the step was finally taken in (1 without cuts).
+    cuts : list of (float, float, str)
+        Every failed attempt of the step: ``(t, dt, reason)``, the time it
+        started from (s), the step size that failed (s) and why.
     seconds : dict
         Wall time (s) by stage: ``"linearize"`` (assembly and projection),
         ``"solve"`` (linear solves), ``"line_search"`` (energy evaluations).
@@ -74,6 +80,7 @@ class StepStats:
     linear_iterations: int = 0
     dt_cuts: int = 0
     substeps: int = 1
+    cuts: list = field(default_factory=list)
     seconds: dict = field(default_factory=lambda: {"linearize": 0.0, "solve": 0.0, "line_search": 0.0})
 
     def add(self, other: "StepStats") -> None:
@@ -115,6 +122,32 @@ class Integrator:
     def step(self, model, state: State, dt: float) -> State:  # pragma: no cover - abstract
         """Advance ``state`` by ``dt`` (s) and return the new State."""
         raise NotImplementedError
+
+    def checkpoint_state(self, state: State) -> dict:
+        """What the integrator remembers between steps, for a checkpoint at ``state``.
+
+        A resumed run restores it with :meth:`restore_state`, so that the next
+        step is computed exactly as it would have been without the stop.
+
+        Parameters
+        ----------
+        state : State
+            The state the next step starts from.
+
+        Returns
+        -------
+        dict of str to numpy.ndarray
+            Arrays of floats or ints; empty for memoryless schemes.
+        """
+        return {}
+
+    def restore_state(self, state: State, saved: dict) -> None:
+        """Take back what :meth:`checkpoint_state` returned, for the next step from ``state``."""
+        if saved:
+            raise InvalidParameter(
+                f"{self.name} keeps no state between steps, but the checkpoint holds "
+                f"{sorted(saved)}: it was written by another integrator."
+            )
 
     def step_matrix(self, h: float, omega: float, zeta: float = 0.0) -> np.ndarray:  # pragma: no cover
         """One-step map ``(q, v) -> (q, v)`` on ``q'' + 2 zeta omega q' + omega^2 q = 0``."""

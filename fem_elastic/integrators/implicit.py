@@ -88,6 +88,7 @@ class _Implicit(Integrator):
         if depth >= self.max_dt_cuts:
             return None, why
         stats.dt_cuts += 1
+        stats.cuts.append((float(state.t), float(h), why))
         log.info("%s: step at t=%.6g s with dt=%.3g s failed (%s); halving", self.name, state.t, h, why)
         mid, why = self._cut_step(model, state, h / 2, depth + 1, stats)
         if mid is None:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse.linalg as spla
 
+from ..errors import InvalidParameter
 from .implicit import ImplicitEuler
 from .incremental import IncrementalPotential
 
@@ -62,6 +63,31 @@ class Newmark(ImplicitEuler):
             M = model.mass_matrix[free][:, free].tocsc()
             a[free] = spla.spsolve(M, f[free])
         return a
+
+    def checkpoint_state(self, state) -> dict:
+        """The remembered acceleration of ``state`` (m/s^2), if it is the state returned last.
+
+        Recomputing it from ``M a = f`` would differ from the scheme's own
+        ``a1`` in the last bits, so a checkpoint keeps it.
+        """
+        last_state, a = self._last
+        return {"acceleration": a.copy()} if last_state is state else {}
+
+    def restore_state(self, state, saved: dict) -> None:
+        """Remember ``saved["acceleration"]`` as the acceleration of ``state`` (if saved)."""
+        unknown = set(saved) - {"acceleration"}
+        if unknown:
+            raise InvalidParameter(f"Newmark cannot restore {sorted(unknown)} from a checkpoint.")
+        a = saved.get("acceleration")
+        if a is None:
+            self._last = (None, None)
+            return
+        a = np.array(a, dtype=float)
+        if a.shape != state.x.shape:
+            raise InvalidParameter(
+                f"the checkpoint's Newmark acceleration has shape {a.shape}, the state {state.x.shape}."
+            )
+        self._last = (state, a)
 
     def _objective(self, model, state, h):
         a = self.acceleration(model, state)
