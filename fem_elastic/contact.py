@@ -580,7 +580,9 @@ class Obstacle:
         ------
         InvalidParameter
             For the barrier, when a node of the reference configuration is not
-            strictly outside the obstacle (its energy would be +inf).
+            strictly outside the obstacle (its energy would be +inf); for the
+            penalty and the impulse response, when one starts deep inside it
+            (see :meth:`_check_start`).
 
         Examples
         --------
@@ -595,12 +597,14 @@ class Obstacle:
         """
         X = np.asarray(space.X, dtype=float)
         m = self._check_mass(nodal_mass, X.size // 3)
+        d = self.signed_distance(X.reshape(-1, 3))
+        if self.method != "barrier":
+            self._check_start(d, space, m, gravity)
         if self.method == "impulse":
             return None
         k = self.node_stiffness(m, gravity)
         if self.method == "penalty":
             return PenaltyContact(self, X, k, nodal_mass=m)
-        d = self.signed_distance(X.reshape(-1, 3))
         if np.any(d <= 0.0):
             bad = np.flatnonzero(d <= 0.0)
             raise InvalidParameter(
@@ -610,6 +614,50 @@ class Obstacle:
                 "obstacle so the body starts with a gap, e.g. dhat / 2."
             )
         return BarrierContact(self, X, k, self.dhat, nodal_mass=m)
+
+    def _check_start(self, d, space, nodal_mass, gravity) -> None:
+        """:class:`InvalidParameter` when the reference configuration starts deep inside the obstacle.
+
+        A body that starts through an obstacle is a placement mistake (a
+        ground above the body's bottom, a sphere around it), and neither
+        method resolves it as contact:
+
+        - the penalty springs push a node at depth ``delta`` with
+          ``k delta``; a body resting under its weight has no node deeper than
+          ``M |g| / k`` (the design ``penetration``, see the module notes), so a
+          node ten times deeper pushes with ten times the body's whole weight
+          and its spring stores ``50 M |g| penetration``: the body is thrown
+          out (a 0.1 m beam started 5 cm through a 1 mm ground flies 0.6 m up).
+          Ten keeps every start a resting or slightly pressed body could have.
+        - the impulse response projects each penetrating node onto the
+          surface at the first step, straining its elements by about
+          ``delta / edge``; beyond 1 % of the shortest edge that is a crush
+          of the elements (energy put in from nowhere), not a contact.
+        """
+        if d.size == 0 or d.min() >= 0.0:
+            return
+        depth = -float(d.min())
+        if self.method == "penalty":
+            rest = float(nodal_mass.sum()) * self._g(gravity) / self.node_stiffness(nodal_mass, gravity)
+            limit = 10.0 * rest
+            scale = (f"10 x the {rest:.3g} m a node of the body at rest under its weight can reach: "
+                     "the contact springs would throw the body out")
+        else:
+            mesh = space.mesh
+            edges = np.asarray(mesh.edges)
+            lengths = np.linalg.norm(mesh.p[:, edges[0]] - mesh.p[:, edges[1]], axis=0)
+            limit = 0.01 * float(lengths.min())
+            scale = ("1 % of the shortest edge: the first step would project those nodes onto the "
+                     "surface and crush their elements")
+        if depth <= limit:
+            return
+        bad = np.flatnonzero(-d > limit)
+        raise InvalidParameter(
+            f"{bad.size} node(s) of the reference configuration start inside {self!r} (node "
+            f"{bad[np.argmin(d[bad])]} is {depth:.3g} m deep), deeper than {limit:.3g} m, "
+            f"{scale}. Move the mesh (mesh.translated(...)) or the obstacle so the body starts "
+            "outside it or just touching it."
+        )
 
     def respond(self, x, v, nodal_mass=None):
         """Impulse response of penetrating nodes (``method="impulse"``).

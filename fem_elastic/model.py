@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Mapping
 from functools import cached_property
 
 import numpy as np
@@ -106,6 +107,11 @@ class Model:
         loads = []
         if gravity is not None:
             loads.append(gravity_load(self.space, self.density, gravity))
+        if traction is not None and not isinstance(traction, Mapping):
+            raise InvalidParameter(
+                "traction must be a dict {boundary name: traction vector (Pa)}, e.g. "
+                f"traction={{'right': (0.0, 0.0, -1e3)}}; got {traction!r}."
+            )
         for name, t in (traction or {}).items():
             loads.append(traction_load(self.space, name, t))
         self.loads = tuple(loads)

@@ -103,10 +103,12 @@ def _node_field(model, value, name: str) -> np.ndarray:
     nv = model.mesh.p.shape[1]
     if value is None:
         return np.zeros(model.ndofs)
+    unit = "m" if name == "displacement" else "m/s"
     if callable(value):
         arr = np.asarray(value(nodes.copy()), dtype=float)
         if arr.shape != (nn, 3):
             raise InvalidParameter(f"the {name} function must return shape ({nn}, 3), got {arr.shape}.")
+        _check_finite(arr, f"the {name} function", unit)
         return arr.ravel()
     try:
         arr = np.asarray(value, dtype=float)
@@ -115,6 +117,7 @@ def _node_field(model, value, name: str) -> np.ndarray:
             f"{name} must be None, a 3-vector, an (n, 3) array or a function of the node "
             f"positions; got {value!r}."
         ) from None
+    _check_finite(arr, name, unit)
     if arr.shape == (3,):
         return np.tile(arr, nn)
     if arr.shape == (nn, 3):
@@ -127,7 +130,18 @@ def _node_field(model, value, name: str) -> np.ndarray:
             edges = model.mesh.edges
             out[np.asarray(space.scalar_basis.edge_dofs)[0]] = 0.5 * (arr[edges[0]] + arr[edges[1]])
         return out.ravel()
+    shapes = f"({nn}, 3)" if nn == nv else f"({nn}, 3) (every node) or ({nv}, 3) (the vertices)"
     raise InvalidParameter(
-        f"{name} must be None, a 3-vector, an array of shape ({nn}, 3) or ({nv}, 3), or a "
+        f"{name} must be None, a 3-vector, an array of shape {shapes}, or a "
         f"function of the node positions; got an array of shape {arr.shape}."
     )
+
+
+def _check_finite(arr: np.ndarray, what: str, unit: str) -> None:
+    """:class:`InvalidParameter` naming the first NaN or infinite entry of an initial field."""
+    bad = np.flatnonzero(~np.isfinite(arr))
+    if bad.size:
+        raise InvalidParameter(
+            f"{what} has {bad.size} NaN or infinite value(s) (first at flat index {bad[0]}), so "
+            f"the simulation would start from a non-finite state; give finite values ({unit})."
+        )

@@ -374,6 +374,27 @@ def test_barrier_build_refuses_a_penetrating_reference_configuration():
         Ground().build(space, np.ones(5))
 
 
+@pytest.mark.parametrize("method", ["penalty", "impulse"])
+def test_build_refuses_a_body_that_starts_deep_inside_the_obstacle(method):
+    # a 1 m cube of 8 kg (1 kg per vertex, P1), edges of 1 m. The penalty refuses a start deeper
+    # than 10 x the resting depth M g / k (= penetration = 1 mm): the limit is 10 mm; the
+    # impulse response refuses one deeper than 1 % of the shortest edge: 10 mm too.
+    space = Discretization(fe.beam_mesh(1.0, 1.0, 1.0, cells=(1, 1, 1)), order=1)
+    limit = 1e-2  # m, both rules on this cube
+    for make in (lambda z: Ground(z=z, method=method),
+                 # a sphere of radius 1e4 m touching the bottom face's centre from below: the bottom
+                 # corners sit 0.25 / 1e4 = 2.5e-5 m higher on it than on the plane, 0.25 % of the limit
+                 lambda z: Sphere((0.5, 0.5, z - 1e4), 1e4, method=method)):
+        make(0.0).build(space, np.ones(8))  # just touching: accepted
+        make(0.9 * limit).build(space, np.ones(8))  # a resting or slightly pressed start: accepted
+        with pytest.raises(InvalidParameter, match=r"4 node\(s\) of the reference configuration start "
+                                                   r"inside .* Move the mesh"):
+            make(1.1 * limit).build(space, np.ones(8))
+    # the penalty's limit follows its stiffness: 10 x softer springs rest 10 x deeper
+    if method == "penalty":
+        Ground(z=0.05, stiffness=8 * G / 1e-2).build(space, np.ones(8))  # rests at 1 cm, limit 10 cm
+
+
 # ------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("make, word", [
     (lambda: Ground(method="spring"), "method"),

@@ -43,3 +43,23 @@ def test_rest_rejects_bad_shapes(model):
         fe.State.rest(model, velocity=np.zeros((5, 2)))
     with pytest.raises(fe.InvalidParameter, match="shape"):
         fe.State(np.zeros(3), np.zeros(4))
+
+
+def test_rest_names_the_shapes_it_accepts(model):
+    nn, nv = model.ndofs // 3, model.mesh.p.shape[1]
+    with pytest.raises(fe.InvalidParameter) as info:
+        fe.State.rest(model, velocity=np.zeros((5, 2)))
+    # P1: nodes are vertices, one shape; P2: every node or the vertices
+    shapes = f"({nn}, 3)," if nn == nv else f"({nn}, 3) (every node) or ({nv}, 3) (the vertices),"
+    assert f"an array of shape {shapes} or a function" in str(info.value)
+
+
+@pytest.mark.parametrize("name", ["displacement", "velocity"])
+def test_rest_rejects_non_finite_fields_in_every_form(model, name):
+    nv = model.mesh.p.shape[1]
+    field = np.zeros((nv, 3))
+    field[3, 1] = np.inf
+    for value, what in [((0.0, np.nan, 0.0), name), (field, name),
+                        (lambda X: np.where(X > 0.5, np.nan, 0.0), f"the {name} function")]:
+        with pytest.raises(fe.InvalidParameter, match=rf"^{what} has \d+ NaN or infinite value"):
+            fe.State.rest(model, **{name: value})
