@@ -1,0 +1,380 @@
+"""The bad inputs a user can give fem_elastic, and what each one gets.
+
+One list, :data:`BAD_INPUTS`, walked by ``tests/test_bad_inputs.py`` (each
+entry is tried and must give exactly its documented outcome) and printed as
+the README's table "Bad input and what you get" by
+``scripts/bad_inputs_table.py`` (``--write`` puts it in the README; the test
+checks the README holds exactly :func:`markdown_table`).
+
+Each entry is a :class:`BadInput`: the input in a user's words, a function
+that tries it on a tiny model (each well under a second), the outcome (an
+error class, a warning class, or the exit status of ``fem-elastic``), a
+fragment of the message naming the problem and one naming the fix. The table
+quotes those fragments, so what it says is what the test checks.
+
+This module is not a test module (no ``test_`` prefix): it holds data.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+import fem_elastic as fe
+
+__all__ = ["BadInput", "BAD_INPUTS", "START_MARKER", "END_MARKER", "markdown_table", "outcome_name"]
+
+START_MARKER = "<!-- bad-inputs:start -->"
+END_MARKER = "<!-- bad-inputs:end -->"
+
+
+@dataclasses.dataclass(frozen=True)
+class BadInput:
+    """One bad input and what the user gets for it.
+
+    Attributes
+    ----------
+    name : str
+        The input in a user's words ("Poisson ratio nu = 0.5").
+    attempt : callable
+        ``attempt(tmp)`` tries it; ``tmp`` is an empty folder (``pathlib.Path``)
+        for files it writes. For a command-line entry it returns the argument
+        list of ``fem-elastic`` instead (the test runs ``fem_elastic.cli.main``).
+    outcome : type or int
+        The error class raised, the warning class issued (the call then
+        returns normally), or the exit status of the command.
+    problem, fix : str
+        Fragments of the message (the command's stderr and stdout): one names
+        what is wrong, the other what to do.
+    note : str
+        More words for the table's "what you get", checked by ``check``.
+    check : callable or None
+        ``check(error)`` (or ``check(result)`` for a warning) asserts what
+        ``note`` claims, e.g. the attributes a ``fe.Diverged`` carries.
+    xfail_reason : str or None
+        Set while the library gets this input wrong: the test is a strict
+        xfail (it fails loudly once fixed, so the entry is updated) and the
+        README table leaves the entry out, to stay true.
+    """
+
+    name: str
+    attempt: Callable
+    outcome: type | int
+    problem: str
+    fix: str
+    note: str = ""
+    check: Callable | None = None
+    xfail_reason: str | None = None
+
+    @property
+    def kind(self) -> str:
+        """``"exit"`` (the command), ``"warns"`` or ``"raises"``."""
+        if isinstance(self.outcome, int):
+            return "exit"
+        return "warns" if issubclass(self.outcome, Warning) else "raises"
+
+
+# -- tiny models ---------------------------------------------------------------------------
+def _mesh():
+    """A 1 m x 0.1 m x 0.1 m beam of 2 cells (12 vertices, 12 tets)."""
+    return fe.beam_mesh(cells=(2, 1, 1))
+
+
+def _body(material=None):
+    return fe.ElasticBody(material or fe.LinearElastic(E=1e6, nu=0.3))
+
+
+def _model(mesh=None, **options):
+    options.setdefault("fixed", "left")
+    return fe.Model(_mesh() if mesh is None else mesh, density=1000.0, body=_body(), **options)
+
+
+def _inverted_mesh():
+    mesh = _mesh()
+    t = mesh.t.T.copy()
+    t[0, [0, 1]] = t[0, [1, 0]]  # swap two vertices of tet 0: negative volume
+    return fe.mesh_from_arrays(mesh.p.T, t, validate=False)
+
+
+_TET = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+
+
+def _simulate(model, integrator, dt=0.01, **options):
+    options.setdefault("steps", 1)
+    return fe.simulate(model, integrator, dt, **options)
+
+
+def _blow_up(tmp):
+    """Symplectic Euler at 5 x its stable step, the warning switched off: it blows up."""
+    model = _model(gravity=(0.0, 0.0, -9.81))
+    return fe.simulate(model, fe.SymplecticEuler(), dt=0.01, steps=200, check_stability=False)
+
+
+def _check_diverged(err) -> None:
+    assert isinstance(err.last_good_state, fe.State) and err.last_good_state.t == err.time
+    # the failed step starts at step * dt (s), up to the round-off of adding dt step times
+    assert err.step >= 1 and math.isclose(err.time, err.step * 0.01, rel_tol=1e-12)
+    assert "energy" in err.reason
+    traj = err.trajectory  # every step recorded: the frames up to the last good state
+    assert isinstance(traj, fe.Trajectory) and traj.times.size == err.step + 1
+    assert np.all(np.isfinite(traj.displacement))
+
+
+def _unreachable_load(tmp):
+    """A soft beam pulled by 1e7 Pa, two Newton iterations per load step, at most 4 load steps."""
+    model = fe.Model(_mesh(), density=1000.0, body=_body(fe.NeoHookean(E=1e3, nu=0.3)), fixed="left",
+                     traction={"right": (0.0, 0.0, -1e7)})
+    return fe.solve_static(model, max_iter=2, min_load_step=0.25)
+
+
+def _check_not_converged(err) -> None:
+    assert isinstance(err.result, fe.StaticResult) and not err.result.converged
+    assert err.result.load_factor < 1.0
+
+
+def _nan_in_state(tmp):
+    model = _model()
+    x = model.X.copy()
+    x[4] = np.nan
+    return _simulate(model, fe.ImplicitEuler(), state=fe.State(x, np.zeros_like(x)))
+
+
+# -- scene files -----------------------------------------------------------------------------
+SCENE = """\
+[mesh]
+kind = "beam"
+cells = [2, 1, 1]
+[body]
+material = "linear"
+E = 1e6
+nu = 0.3
+density = 1000.0
+[boundary]
+fixed = ["left"]
+[integrator]
+type = "implicit_euler"
+[time]
+dt = 0.01
+duration = 0.02
+"""
+
+
+def _scene(old, new):
+    """The scene with one edit, parsed and built (names are checked against the mesh at build)."""
+    assert old in SCENE, old
+    return fe.parse_scene(SCENE.replace(old, new, 1), source="scene.toml").build()
+
+
+def _check_suggestion(expected):
+    def check(err):
+        assert err.suggestion == expected and err.line is not None and err.file == "scene.toml"
+    return check
+
+
+def _write(tmp, name, text):
+    path = Path(tmp) / name
+    path.write_text(text)
+    return path
+
+
+def _cli_scene(tmp, old, new, *options):
+    assert old in SCENE, old
+    path = _write(tmp, "scene.toml", SCENE.replace(old, new, 1))
+    return ["run", str(path), "--out", str(Path(tmp) / "out"), "--quiet", "--no-render", *options]
+
+
+# -- the list ----------------------------------------------------------------------------------
+IP, IM, SE = fe.InvalidParameter, fe.InvalidMesh, fe.SceneError
+
+BAD_INPUTS: list[BadInput] = [
+    # materials and the model
+    BadInput("Poisson ratio nu = 0.5", lambda tmp: fe.NeoHookean(E=1e6, nu=0.5), IP,
+             "nu must be < 0.5", "Use a value such as 0.49 or 0.499"),
+    BadInput("Young's modulus E <= 0", lambda tmp: fe.StVK(E=0.0, nu=0.3), IP,
+             "E must be > 0 Pa, got E = 0.0", "Pass the stiffness in pascals, e.g. E=1e6"),
+    BadInput("density <= 0", lambda tmp: fe.Model(_mesh(), density=-1.0, body=_body()), IP,
+             "density must be finite and > 0 kg/m^3, got -1.0", "e.g. 1000.0 for rubber-like solids"),
+    BadInput("element order 3", lambda tmp: fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3), order=3), IP,
+             "element order must be 1 (linear tets) or 2 (quadratic tets), got 3",
+             "1 (linear tets) or 2 (quadratic tets)"),
+    BadInput("a material where the body goes (body=fe.NeoHookean(...))",
+             lambda tmp: fe.Model(_mesh(), density=1000.0, body=fe.NeoHookean(E=1e6, nu=0.3)), IP,
+             "got NeoHookean(E=1000000.0, nu=0.3)", "body must be e.g. fe.ElasticBody(fe.NeoHookean"),
+    BadInput("a static problem with rigid-body motion left free (nothing fixed)",
+             lambda tmp: fe.solve_static(_model(fixed=None, gravity=(0.0, 0.0, -9.81))), fe.UnderConstrained,
+             "the model fixes nothing", "Fix a boundary, e.g. fe.Model(..., fixed='left')"),
+    BadInput("a static problem fixed only along one line of vertices",
+             lambda tmp: fe.solve_static(_model(fixed=[0, 1], gravity=(0.0, 0.0, -9.81))), fe.UnderConstrained,
+             "leave 1 rigid-body mode(s) free",
+             "Fix a whole face (fixed='left') or at least three vertices that are not on one line"),
+    BadInput("a fixed boundary the mesh does not have (fixed=\"lefft\")", lambda tmp: _model(fixed="lefft"), IP,
+             "fixed names boundary 'lefft', which the mesh does not have",
+             "its boundaries are ['back', 'bottom', 'front', 'left', 'right', 'top']"),
+    BadInput("a traction on a boundary that does not exist",
+             lambda tmp: _model(traction={"rigth": (0.0, 0.0, -1e3)}), IP,
+             "traction names boundary 'rigth', which the mesh does not have",
+             "its boundaries are ['back', 'bottom', 'front', 'left', 'right', 'top']"),
+    BadInput("a traction given as a list, not {boundary: vector}",
+             lambda tmp: _model(traction=[(0.0, 0.0, -1e3)]), IP,
+             "got [(0.0, 0.0, -1000.0)]", "traction must be a dict {boundary name: traction vector (Pa)}"),
+    BadInput("a fixed vertex index out of range", lambda tmp: _model(fixed=[0, 999]), IP,
+             "fixed vertex indices must lie in [0, 11], got values from 0 to 999", "must lie in [0, 11]"),
+    BadInput("gravity with two components", lambda tmp: _model(gravity=(0.0, -9.81)), IP,
+             "gravity must be three finite numbers (m/s^2)", "e.g. (0.0, 0.0, -9.81)"),
+    BadInput("an obstacle class instead of an instance (ground=fe.Ground)", lambda tmp: _model(ground=fe.Ground),
+             IP, "got <class 'fem_elastic.contact.Ground'>", "ground must be an obstacle such as fe.Ground(z=0.0)"),
+    BadInput("a ground through the body's start (penalty contact)",
+             lambda tmp: _model(fixed=None, gravity=(0.0, 0.0, -9.81), ground=fe.Ground(z=0.05)), IP,
+             "node(s) of the reference configuration start inside Ground(",
+             "Move the mesh (mesh.translated(...)) or the obstacle"),
+    BadInput("a barrier ground touching the body's start",
+             lambda tmp: _model(fixed=None, ground=fe.Ground(z=0.0, method="barrier")), IP,
+             "are not strictly outside Ground(", "so the body starts with a gap, e.g. dhat / 2"),
+    BadInput("negative Rayleigh damping", lambda tmp: fe.Rayleigh(alpha=-1.0), IP,
+             "Rayleigh damping alpha must be a finite number >= 0 (1/s), got -1.0", "a finite number >= 0"),
+    # meshes
+    BadInput("an inverted element in the mesh", lambda tmp: _model(_inverted_mesh()), IM,
+             "1 tets are inverted (negative signed volume): elements [0]", "fem_elastic.reorient(mesh)"),
+    BadInput("a degenerate (zero-volume) tet",
+             lambda tmp: fe.mesh_from_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], [[0, 1, 2, 3]]), IM,
+             "1 tets have (nearly) zero volume", "remesh (e.g. TetGen or gmsh with a quality constraint)"),
+    BadInput("NaN in the mesh coordinates",
+             lambda tmp: fe.mesh_from_arrays(np.array(_TET) * [[1, 1, 1], [1, 1, 1], [1, 1, 1], [1, 1, np.nan]],
+                                             [[0, 1, 2, 3]]), IM,
+             "1 vertices have NaN or infinite coordinates: vertices [3]",
+             "drop those vertices and the tets that use them"),
+    BadInput("a tet index out of range", lambda tmp: fe.mesh_from_arrays(_TET, [[0, 1, 2, 4]]), IM,
+             "1 tets refer to vertex indices outside [0, 3]", "0-based indices are expected"),
+    BadInput("a vertex that no tet uses", lambda tmp: fe.mesh_from_arrays(_TET + [[5.0, 5.0, 5.0]], [[0, 1, 2, 3]]),
+             IM, "1 vertices are not used by any tet", "fem_elastic.remove_unused_vertices(mesh)"),
+    BadInput("a hexahedral mesh", lambda tmp: _model(__import__("skfem").MeshHex()), IM,
+             "A tetrahedral mesh (skfem.MeshTet) is needed, got MeshHex1",
+             "a MeshHex can be split with skfem.MeshTet.init_tensor"),
+    BadInput("a mesh file meshio cannot read", lambda tmp: fe.load_mesh(_write(tmp, "broken.vtu", "garbage")), IM,
+             "meshio could not read", "Check that it is a tet mesh in that format"),
+    BadInput("a mesh file with an unknown extension", lambda tmp: fe.load_mesh(_write(tmp, "beam.xyz", "1 2 3\n")),
+             IP, "Unknown mesh file extension", "use .vtu (or gmsh's .msh) for tet meshes"),
+    # time stepping
+    BadInput("dt <= 0", lambda tmp: _simulate(_model(), fe.ImplicitEuler(), dt=0.0), IP,
+             "dt must be a finite number > 0 (s), got 0.0", "e.g. dt=1e-3"),
+    BadInput("dt = nan", lambda tmp: _simulate(_model(), fe.ImplicitEuler(), dt=float("nan")), IP,
+             "dt must be a finite number > 0 (s), got nan", "e.g. dt=1e-3"),
+    BadInput("t_end before the start", lambda tmp: _simulate(_model(), fe.ImplicitEuler(), steps=None, t_end=-1.0),
+             IP, "t_end = -1.0 s is not after the initial state's time 0.0 s",
+             "use steps=N for a number of steps"),
+    BadInput("record_every = 0", lambda tmp: _simulate(_model(), fe.ImplicitEuler(), record_every=0), IP,
+             "record_every must be an integer >= 1, got 0", "an integer >= 1"),
+    BadInput("a state of the wrong size",
+             lambda tmp: _simulate(_model(), fe.ImplicitEuler(), state=fe.State(np.zeros(6), np.zeros(6))), IP,
+             "the state has 6 DOFs but the model has 36", "build it with fe.State.rest(model, ...)"),
+    BadInput("NaN in an initial velocity", lambda tmp: fe.State.rest(_model(), velocity=(0.0, 0.0, np.nan)), IP,
+             "velocity has 1 NaN or infinite value(s)", "give finite values (m/s)"),
+    BadInput("NaN in the positions of the state given to simulate", _nan_in_state, IP,
+             "NaN", "finite",
+             xfail_reason="simulate's check_state (integrators/base.py) checks only the type and size: "
+                          "the NaN state gets fe.Diverged 'an element is inverted at the start of the step'"),
+    BadInput("an integrator class instead of an instance (fe.ImplicitEuler)",
+             lambda tmp: _simulate(_model(), fe.ImplicitEuler), IP, "class", "fe.ImplicitEuler()",
+             xfail_reason="simulate accepts the class (it has .step) and fails with a TypeError: "
+                          "missing 1 required positional argument: 'dt'"),
+    BadInput("dt so small that dt^2 underflows (dt = 1e-300 s)",
+             lambda tmp: _simulate(_model(gravity=(0.0, 0.0, -9.81)), fe.ImplicitEuler(), dt=1e-300), IP,
+             "dt", "dt",
+             xfail_reason="check_dt accepts it and ImplicitEuler divides by dt^2 = 0: ZeroDivisionError"),
+    BadInput("an explicit dt above the critical step",
+             lambda tmp: _simulate(_model(gravity=(0.0, 0.0, -9.81)), fe.SymplecticEuler()), fe.StabilityWarning,
+             "dt = 0.01 s exceeds SymplecticEuler's critical time step", "Use dt <= "),
+    BadInput("explicit Euler on an undamped body",
+             lambda tmp: _simulate(_model(gravity=(0.0, 0.0, -9.81)), fe.ExplicitEuler(), dt=1e-5),
+             fe.StabilityWarning, "ExplicitEuler is unstable at every time step on an undamped body",
+             "add damping (fe.Rayleigh) or use fe.SymplecticEuler"),
+    BadInput("a simulation that blows up", _blow_up, fe.Diverged,
+             "the simulation diverged at step", "Try a smaller dt, an implicit integrator (fe.ImplicitEuler)",
+             note="carrying .step, .time, .reason, .last_good_state and .trajectory (the frames so far)",
+             check=_check_diverged),
+    BadInput("a static load the solver cannot reach", _unreachable_load, fe.NotConverged,
+             "solve_static did not reach the full load", "Try more Newton iterations (max_iter=...)",
+             note="carrying .result (the equilibrium reached so far)", check=_check_not_converged),
+    # scene files (Python)
+    BadInput("an unknown key in a scene file", lambda tmp: _scene("E = 1e6", "Young = 1e6"), SE,
+             'scene.toml, line 6: [body] unknown key "Young"', 'did you mean "E"?', check=_check_suggestion("E")),
+    BadInput("a wrong type in a scene file", lambda tmp: _scene("dt = 0.01", 'dt = "fast"'), SE,
+             'scene.toml, line 14: [time] dt must be a number (s), got "fast" (a string)', "dt must be a number"),
+    BadInput("a TOML syntax error", lambda tmp: _scene("[time]", "[time"), SE,
+             "scene.toml, line 13: TOML syntax error", "Check the quotes, brackets and '=' there"),
+    BadInput("a misspelt material in a scene file", lambda tmp: _scene('"linear"', '"neohookean"'), SE,
+             '[body] material = "neohookean" is not allowed', 'did you mean "neo_hookean"?',
+             check=_check_suggestion("neo_hookean")),
+    BadInput("an unknown boundary name in a scene file", lambda tmp: _scene('["left"]', '["lefft"]'), SE,
+             'scene.toml, line 10: [boundary] the mesh has no boundary "lefft"', 'did you mean "left"?',
+             check=_check_suggestion("left")),
+    BadInput("a missing table in a scene file", lambda tmp: _scene("[time]\ndt = 0.01\nduration = 0.02\n", ""), SE,
+             "missing table [time]", "add [time] with dt, duration"),
+    BadInput("a scene's mesh file that does not exist",
+             lambda tmp: _scene('kind = "beam"\ncells = [2, 1, 1]', 'kind = "file"\npath = "nope.vtu"'), SE,
+             'mesh file "nope.vtu" not found', "the path is relative to the scene file's folder"),
+    # the command
+    BadInput("a CLI run of a scene with an unknown key", lambda tmp: _cli_scene(tmp, "E = 1e6", "Young = 1e6"), 2,
+             '[body] unknown key "Young"', 'did you mean "E"?'),
+    BadInput("a CLI scene path that does not exist",
+             lambda tmp: ["run", str(Path(tmp) / "nope.toml"), "--out", str(Path(tmp) / "out")], 2,
+             "nope.toml' not found", "check the path"),
+    BadInput("a CLI --out below a file",
+             lambda tmp: ["run", str(_write(tmp, "scene.toml", SCENE)), "--out", str(_write(tmp, "a_file", "") / "out"),
+                          "--quiet"], 2,
+             "Not a directory", "check the path and its permissions"),
+    BadInput("a CLI option out of range (--fps -5)", lambda tmp: ["render", str(tmp), "--fps", "-5"], 2,
+             "argument --fps", "must be >= 1"),
+    BadInput("fem-elastic info on a file meshio cannot read",
+             lambda tmp: ["info", str(_write(tmp, "broken.vtu", "garbage"))], 2,
+             "meshio could not read", "Check that it is a tet mesh in that format"),
+    BadInput("fem-elastic render on a folder with no run in it", lambda tmp: ["render", str(tmp), "--format", "png"],
+             2, "holds no VTU series", "give the output directory of"),
+    BadInput("a CLI run that blows up",
+             lambda tmp: _cli_scene(tmp, 'type = "implicit_euler"\n[time]\ndt = 0.01\nduration = 0.02',
+                                    'type = "symplectic_euler"\n[time]\ndt = 0.02\nduration = 2.0\n'
+                                    "[loads]\ngravity = [0.0, 0.0, -9.81]"), 1,
+             "diverged at step", "smaller dt",
+             xfail_reason="the run's message (stdout table, summary.json, log) is the Diverged reason "
+                          "without the fix: runner.py keeps traj.message, not str(err)"),
+]
+
+
+# -- the table -------------------------------------------------------------------------------------
+def outcome_name(outcome) -> str:
+    """``fe.InvalidParameter`` for a class of the public namespace, else its qualified name."""
+    name = outcome.__name__
+    if getattr(fe, name, None) is outcome:
+        return f"fe.{name}"
+    return f"{outcome.__module__}.{name}" if outcome.__module__ != "builtins" else name
+
+
+def _code(text: str) -> str:
+    assert "`" not in text and "\n" not in text, text
+    return "`" + text.replace("|", "\\|") + "`"
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|")
+
+
+def markdown_table(entries=None) -> str:
+    """The README table (markdown, ending in a newline) of the entries the library handles."""
+    rows = ["| bad input | what you get | what the message tells you to do |", "|---|---|---|"]
+    for e in BAD_INPUTS if entries is None else entries:
+        if e.xfail_reason:
+            continue
+        if e.kind == "exit":
+            gets = f"exit status {e.outcome}, no traceback: {_code(e.problem)}"
+        elif e.kind == "warns":
+            gets = f"`{outcome_name(e.outcome)}` (a warning; the run goes on): {_code(e.problem)}"
+        else:
+            gets = f"`{outcome_name(e.outcome)}`: {_code(e.problem)}"
+        if e.note:
+            gets += f", {_cell(e.note)}"
+        rows.append(f"| {_cell(e.name)} | {gets} | {_code(e.fix)} |")
+    return "\n".join(rows) + "\n"
