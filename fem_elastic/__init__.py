@@ -15,6 +15,7 @@ imported inside the I/O functions, pyamg inside the AMG solver.
 
 from . import study
 from .analytic import RectangularCantilever, elastica_tip
+from .checkpoint import Checkpoint, load_checkpoint
 from .contact import Box, Ground, Obstacle, Sphere
 from .damping import Rayleigh
 from .driven import Motion, Prescribed, Translate, Twist
@@ -74,6 +75,8 @@ from .trajectory import Trajectory
 __version__ = "0.1.0"
 
 __all__ = [
+    "Checkpoint",
+    "load_checkpoint",
     "study", "elastica_tip",
     "CellFields", "cell_fields", "von_mises", "SeriesData", "read_series", "write_pvd", "write_vtu_frame",
     "SeriesWriter", "write_summary",

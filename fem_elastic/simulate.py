@@ -33,20 +33,20 @@ import math
 import numbers
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
 from .errors import Diverged, InvalidParameter
 from .integrators.base import check_dt, check_state
+from .checkpoint import _Snapshot, frame_record
 from .state import State
-from .trajectory import Trajectory
+from .trajectory import COUNT_FIELDS, STEP_FIELDS, Trajectory
 
 __all__ = ["simulate", "StabilityWarning"]
 
 log = logging.getLogger(__name__)
 
-_STAT_FIELDS = ("gradient_evaluations", "newton_iterations", "line_search_cuts",
-                "linear_iterations", "dt_cuts")
 
 
 class StabilityWarning(UserWarning):
@@ -66,6 +66,9 @@ def simulate(
     check_stability: bool = True,
     energy_growth: float = 1.0,
     callback=None,
+    checkpoint_dir=None,
+    checkpoint_every: int = 0,
+    resume: bool = False,
 ) -> Trajectory:
     """Integrate ``model`` in time.
 
@@ -91,23 +94,43 @@ def simulate(
     check_stability : bool
         For explicit schemes, estimate the critical time step
         (:func:`fe.critical_time_step`) and warn (:class:`StabilityWarning`)
-        when ``dt`` exceeds it.
+        when ``dt`` exceeds it (not for schemes that sub-step, ``substep=True``).
     energy_growth : float
         Divergence bound on the energy growth, in units of the scene's
         energy scale (see the module notes); ``inf`` switches the check off.
     callback : callable, optional
         ``callback(step, state)`` after every step (e.g. to write output);
         an exception raised there stops the run and propagates.
+    checkpoint_dir : str or os.PathLike, optional
+        Write checkpoints to this directory (:mod:`fem_elastic.checkpoint`):
+        every ``checkpoint_every`` steps, on Ctrl-C (the last step completed)
+        and at the end. Each is written atomically; the recorded history is
+        appended, not rewritten.
+    checkpoint_every : int
+        Steps between checkpoints (0: only on Ctrl-C and at the end).
+    resume : bool
+        Continue from the checkpoint in ``checkpoint_dir`` if there is one
+        (else start afresh). It must come from the same run: the same model,
+        integrator and settings, dt, steps, ``record_every`` and initial
+        state (else :class:`fe.InvalidParameter`). The Trajectory returned is
+        the whole run's, bit for bit what the uninterrupted run records
+        (wall times aside); a finished checkpoint returns it at once.
+        Without ``resume`` an earlier checkpoint there is replaced.
 
     Returns
     -------
     Trajectory
+        ``cuts`` lists every failed attempt of a step (implicit Newton
+        failures halve dt, explicit sub-stepping re-estimates its step) and
+        ``dt_cuts`` counts the steps that needed one.
 
     Raises
     ------
     Diverged
         With ``step``, ``time``, ``reason``, ``last_good_state`` and
         ``trajectory`` (the frames recorded up to the last good state).
+    KeyboardInterrupt
+        Ctrl-C, after writing a checkpoint of the last step completed (with ``checkpoint_dir``).
 
     Examples
     --------
@@ -135,37 +158,57 @@ def simulate(
             f"integrator must be e.g. fe.ImplicitEuler() or fe.SymplecticEuler(), got {integrator!r}."
         )
     mass = "lumped" if getattr(integrator, "explicit", True) else getattr(integrator, "mass", "lumped")
-    if check_stability and getattr(integrator, "explicit", False):
+    if check_stability and getattr(integrator, "explicit", False) and not getattr(integrator, "substep", False):
         _warn_if_unstable(model, integrator, h)
 
     rec = _Recorder(model, mass)
-    stats = {k: np.zeros(n_steps, dtype=np.int64) for k in _STAT_FIELDS}
-    for k in ("seconds_linearize", "seconds_solve", "seconds_line_search", "seconds_step"):
+    ckpt, start = _checkpointer(model, integrator, h, n_steps, int(record_every), state, energy_growth,
+                                checkpoint_dir, checkpoint_every, resume, rec.frame_size)
+    stats = {k: np.zeros(n_steps, dtype=np.int64) for k in COUNT_FIELDS}
+    for k in STEP_FIELDS[len(COUNT_FIELDS):]:
         stats[k] = np.zeros(n_steps)
+    cuts: list = []
     t_start = time.perf_counter()
-    e0 = rec.energies(state)
-    e_ref, scale = rec.record(state, e0), _energy_scale(model, state, e0)
-    driving = model.driving(state.t)
+    if start is None:
+        e0 = rec.energies(state)
+        e_ref, scale = rec.record(state, e0), _energy_scale(model, state, e0)
+        driving, k0, wall0 = model.driving(state.t), 0, 0.0
+    else:  # continue where the checkpoint left off, with everything the loop had in hand
+        rec.frames = list(start.frames)
+        for name, values in start.step_stats.items():
+            stats[name][:start.step] = values
+        cuts = list(start.cuts)
+        state, k0, wall0 = start.state, start.step, start.wall_time
+        e_ref, scale, driving = start.e_ref, start.scale, start.driving
+        integrator.restore_state(state, start.integrator_state)
+        log.info("resuming at step %d of %d (t = %.6g s) from %s", k0, n_steps, state.t, ckpt.directory)
+
+    def snapshot(k_done):
+        return _Snapshot(k_done, state, len(rec.frames), len(cuts), e_ref, scale, driving,
+                         wall0 + time.perf_counter() - t_start, integrator.checkpoint_state(state))
+
+    snap = snapshot(k0) if ckpt is not None else None
     check_every = max(1, min(int(record_every), 10))
-    bar = _progress_bar(n_steps, progress)
-    k = 0
+    bar = _progress_bar(n_steps, progress, k0)
     try:
-        for k in range(n_steps):
+        for k in range(k0, n_steps):
             t0 = time.perf_counter()
             try:
                 new = integrator.step(model, state, h)
             except Diverged as err:
+                _collect_cuts(cuts, k, getattr(integrator, "last_stats", None))
                 raise _diverged(err.reason or str(err), k, state, rec, stats, k, t_start, integrator, h,
-                                str(err)) from err
+                                cuts, str(err), wall0) from err
             stats["seconds_step"][k] = time.perf_counter() - t0
             st = integrator.last_stats
-            for name in _STAT_FIELDS:
-                stats[name][k] = getattr(st, name, 0)
+            for name in COUNT_FIELDS:
+                stats[name][k] = getattr(st, name, 1 if name == "substeps" else 0)
             for name in ("linearize", "solve", "line_search"):
                 stats[f"seconds_{name}"][k] = st.seconds.get(name, 0.0)
+            _collect_cuts(cuts, k, st)
             if not (np.isfinite(new.x).all() and np.isfinite(new.v).all()):
                 raise _diverged("non-finite positions or velocities", k, state, rec, stats, k,
-                                t_start, integrator, h)
+                                t_start, integrator, h, cuts, None, wall0)
             last = k == n_steps - 1
             was_driving, driving = driving, model.driving(new.t)
             record = (k + 1) % record_every == 0 or last
@@ -174,30 +217,84 @@ def simulate(
                 e = rec.energies(new)
                 if not math.isfinite(e[2]):
                     raise _diverged("the energy is not finite (an inverted element?)", k, state, rec,
-                                    stats, k, t_start, integrator, h)
+                                    stats, k, t_start, integrator, h, cuts, None, wall0)
                 if released:  # the drive stopped: the energy from here on is the budget
                     e_ref, scale = e[2], max(scale, abs(e[2]))
                 elif not driving and e[2] > e_ref + energy_growth * scale:
                     raise _diverged(
                         f"the total energy grew from {e_ref:.6g} J to {e[2]:.6g} J (more than "
                         f"{energy_growth:g} x the scene's energy scale {scale:.3g} J) with no "
-                        "energy source", k, state, rec, stats, k, t_start, integrator, h,
+                        "energy source", k, state, rec, stats, k, t_start, integrator, h, cuts, None, wall0,
                     )
                 if record:
                     rec.record(new, e)
             state = new
             if callback is not None:
                 callback(k, state)
+            if ckpt is not None:
+                # everything the loop holds after k + 1 steps, taken as one: a Ctrl-C from here
+                # on checkpoints this step, never a half-updated one
+                snap = snapshot(k + 1)
+                if ckpt.due(k + 1) and not last:
+                    ckpt.write(snap, rec.frames, stats, cuts)
             if bar is not None:
                 bar.update(1)
+    except KeyboardInterrupt:
+        if ckpt is not None and snap.step > ckpt.last_step:
+            ckpt.write(snap, rec.frames, stats, cuts)
+            log.warning("interrupted: checkpoint after %d of %d steps (t = %.6g s) in %s; "
+                        "resume=True continues from it", snap.step, n_steps, snap.state.t, ckpt.directory)
+        raise
     finally:
         if bar is not None:
             bar.close()
-    traj = rec.trajectory(stats, n_steps, time.perf_counter() - t_start, integrator, h, state)
+    wall = wall0 + time.perf_counter() - t_start
+    if ckpt is not None and ckpt.last_step < n_steps:
+        snap.wall_time = wall
+        ckpt.write(snap, rec.frames, stats, cuts)
+    traj = rec.trajectory(stats, n_steps, wall, integrator, h, state, cuts)
     traj.message = f"completed {n_steps} steps to t = {state.t:.6g} s"
+    if start is not None:
+        traj.resumed_from_step = start.step
+        traj.message += f" (resumed at step {start.step})"
     log.info("%s: %s in %.3g s", integrator.name if hasattr(integrator, "name") else integrator,
              traj.message, traj.wall_time)
     return traj
+
+
+def _checkpointer(model, integrator, h, n_steps, record_every, state0, energy_growth, directory,
+                  every, resume, frame_size):
+    """The run's Checkpointer and the checkpoint it resumes from (None, None without a directory)."""
+    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 0:
+        raise InvalidParameter(
+            f"checkpoint_every must be an integer >= 0 (steps; 0: only on Ctrl-C and at the end), "
+            f"got {every!r}."
+        )
+    if directory is None:
+        if every or resume:
+            raise InvalidParameter(
+                "checkpoint_every and resume need checkpoint_dir=DIR, the directory the "
+                "checkpoints are written to (and resumed from)."
+            )
+        return None, None
+    from .checkpoint import CHECKPOINT_NAME, Checkpointer, check_resumable, load_checkpoint, run_fingerprint
+
+    d = Path(directory)
+    if d.exists() and not d.is_dir():
+        raise InvalidParameter(f"checkpoint_dir {d} is a file; give a directory.")
+    fingerprint = run_fingerprint(model, integrator, h, n_steps, record_every, state0, energy_growth)
+    start = None
+    if resume and (d / CHECKPOINT_NAME).is_file():
+        start = load_checkpoint(d)
+        check_resumable(start, fingerprint)
+    elif resume:
+        log.info("no checkpoint in %s: starting the run from its initial state", d)
+    return Checkpointer(d, int(every), fingerprint, frame_size, resume=start), start
+
+
+def _collect_cuts(cuts, k, stats) -> None:
+    for t, dt, reason in getattr(stats, "cuts", ()):
+        cuts.append({"step": int(k), "t": float(t), "dt": float(dt), "reason": str(reason)})
 
 
 _MAX_STEPS = 10**8  # per-step statistics take 8 arrays of this length
@@ -264,9 +361,12 @@ def _energy_scale(model, state, energies):
 
 
 class _Recorder:
+    """The recorded frames, each one flat record (:func:`fem_elastic.checkpoint.frame_record`)."""
+
     def __init__(self, model, mass):
         self.model, self.mass = model, mass
         self.frames = []
+        self.frame_size = 9 + 6 * model.mesh.p.shape[1]
 
     def energies(self, state):
         ke = self.model.kinetic_energy(state.v, self.mass)
@@ -276,26 +376,28 @@ class _Recorder:
     def record(self, state, e=None):
         e = self.energies(state) if e is None else e
         m = self.model
-        self.frames.append((
+        self.frames.append(frame_record(
             state.t, m.to_vertices(state.x - m.X), m.to_vertices(state.v), e[0], e[1],
             m.linear_momentum(state.v), m.angular_momentum(state.x, state.v),
         ))
         return e[2]
 
-    def trajectory(self, stats, n, wall, integrator, h, state):
-        cols = list(zip(*self.frames))
-        kin, pot = np.array(cols[3]), np.array(cols[4])
+    def trajectory(self, stats, n, wall, integrator, h, state, cuts):
+        f = np.array(self.frames).reshape(len(self.frames), self.frame_size)
+        nv3 = (self.frame_size - 9) // 2
+        kin, pot = f[:, 1].copy(), f[:, 2].copy()
         return Trajectory(
-            times=np.array(cols[0]), displacement=np.array(cols[1]), velocity=np.array(cols[2]),
-            kinetic=kin, potential=pot, total=kin + pot, linear_momentum=np.array(cols[5]),
-            angular_momentum=np.array(cols[6]), step_stats={k: v[:n] for k, v in stats.items()},
-            wall_time=wall, steps=n, dt=h, integrator=getattr(integrator, "name", str(integrator)),
-            final_state=state,
+            times=f[:, 0].copy(), displacement=f[:, 9:9 + nv3].reshape(len(f), -1, 3),
+            velocity=f[:, 9 + nv3:].reshape(len(f), -1, 3), kinetic=kin, potential=pot,
+            total=kin + pot, linear_momentum=f[:, 3:6].copy(), angular_momentum=f[:, 6:9].copy(),
+            step_stats={k: v[:n] for k, v in stats.items()}, wall_time=wall, steps=n, dt=h,
+            integrator=getattr(integrator, "name", str(integrator)), final_state=state,
+            cuts=list(cuts),
         )
 
 
-def _diverged(reason, k, state, rec, stats, n_done, t_start, integrator, h, detail=None):
-    traj = rec.trajectory(stats, n_done, time.perf_counter() - t_start, integrator, h, state)
+def _diverged(reason, k, state, rec, stats, n_done, t_start, integrator, h, cuts, detail=None, wall0=0.0):
+    traj = rec.trajectory(stats, n_done, wall0 + time.perf_counter() - t_start, integrator, h, state, cuts)
     traj.message = f"diverged at step {k}: {reason}"
     err = Diverged(
         f"the simulation diverged at step {k} (t = {state.t:.6g} s): {(detail or reason).rstrip('.')}. The last "
@@ -307,7 +409,7 @@ def _diverged(reason, k, state, rec, stats, n_done, t_start, integrator, h, deta
     return err
 
 
-def _progress_bar(n, progress):
+def _progress_bar(n, progress, initial=0):
     if not progress:
         return None
     try:
@@ -315,4 +417,4 @@ def _progress_bar(n, progress):
     except ImportError:
         log.warning("progress=True needs tqdm (pip install fem_elastic[cli]); running without a bar")
         return None
-    return tqdm(total=n, unit="step", desc="simulate")
+    return tqdm(total=n, initial=initial, unit="step", desc="simulate")

@@ -10,7 +10,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Trajectory"]
+__all__ = ["Trajectory", "STEP_FIELDS", "COUNT_FIELDS"]
+
+#: The per-step statistics of a run (``Trajectory.step_stats``): counts, then seconds.
+STEP_FIELDS = ("gradient_evaluations", "newton_iterations", "line_search_cuts",
+               "linear_iterations", "dt_cuts", "substeps", "seconds_linearize", "seconds_solve",
+               "seconds_line_search", "seconds_step")
+COUNT_FIELDS = STEP_FIELDS[:6]
+
+
+_CUTS_LISTED = 50  # a summary lists the first failed attempts, and counts the rest
 
 
 @dataclass
@@ -30,8 +39,13 @@ class Trajectory:
         ``(T, 3)`` (kg m/s) and about the origin (kg m^2/s), with the lumped mass.
     step_stats : dict of numpy.ndarray
         Per step ``(steps,)``: ``gradient_evaluations``, ``newton_iterations``,
-        ``line_search_cuts``, ``linear_iterations``, ``dt_cuts``, and
+        ``line_search_cuts``, ``linear_iterations``, ``dt_cuts`` (failed attempts
+        before the step succeeded), ``substeps`` (sub-steps it was taken in), and
         ``seconds_linearize``, ``seconds_solve``, ``seconds_line_search``, ``seconds_step``.
+    cuts : list of dict
+        Every failed attempt of a step, where and why: ``step`` (index),
+        ``t`` (s, where the attempt started), ``dt`` (s, the step size that
+        failed) and ``reason``.
     wall_time : float
         Wall time of the whole run (s), recording included.
     steps : int
@@ -44,6 +58,8 @@ class Trajectory:
         The state after the last step taken.
     message : str
         How the run ended.
+    resumed_from_step : int or None
+        The step a resumed run continued from (its checkpoint), else None.
     """
 
     times: np.ndarray
@@ -61,10 +77,12 @@ class Trajectory:
     integrator: str = ""
     final_state: object = None
     message: str = ""
+    cuts: list = field(default_factory=list)
+    resumed_from_step: int | None = None
 
     @property
     def dt_cuts(self) -> int:
-        """Steps that had to be cut (Newton failed at the full dt)."""
+        """Steps that had to be cut (Newton failed at the full dt, or an explicit sub-step failed)."""
         return int(np.count_nonzero(self.step_stats.get("dt_cuts", np.zeros(0))))
 
     def summary(self) -> dict:
@@ -81,7 +99,12 @@ class Trajectory:
             "energy_final": float(self.total[-1]) if self.total.size else None,
             "message": self.message,
             "steps_cut": self.dt_cuts,
+            "cuts": self.cuts[:_CUTS_LISTED],
         }
+        if len(self.cuts) > _CUTS_LISTED:
+            out["cuts_not_listed"] = len(self.cuts) - _CUTS_LISTED
+        if self.resumed_from_step is not None:
+            out["resumed_from_step"] = self.resumed_from_step
         for k, v in st.items():
             out[f"{k}_total"] = float(np.sum(v))
         return out

@@ -1,0 +1,449 @@
+"""Checkpoints of a simulation: stop a long run anywhere and continue it bit for bit.
+
+:func:`fe.simulate` with ``checkpoint_dir=DIR`` writes a checkpoint every
+``checkpoint_every`` steps, when the run is interrupted (Ctrl-C) and when it
+completes; ``resume=True`` continues from the last one, and the resumed run
+records exactly (bit for bit) the trajectory the uninterrupted run records.
+
+A checkpoint directory holds
+
+- ``checkpoint.npz``: the state (``x``, ``v``, ``t``), what the integrator
+  remembers between steps (:meth:`Integrator.checkpoint_state`, e.g.
+  Newmark's acceleration), the loop's own bookkeeping (the energy bound's
+  reference and scale, whether a driven boundary was moving, the wall time so
+  far) and the counts of records below that belong to it; plus a description
+  of the run (model, integrator and settings) that a resume must match.
+  Written to a temporary file, fsynced and renamed over the old one: it is
+  always a whole checkpoint, the new or the previous.
+- ``frames.f64``: the recorded frames, appended (one fixed-size record of
+  float64 per frame: t, kinetic and potential energy (J), linear (kg m/s)
+  and angular (kg m^2/s) momentum, vertex displacements (m) and velocities (m/s));
+- ``steps.f64``: the per-step solver statistics, appended (one record per step, the
+  fields of ``Trajectory.step_stats`` in the order of ``trajectory.STEP_FIELDS``;
+  counts are stored as float64, exact below 2^53);
+- ``cuts.jsonl``: every failed attempt of a step (step, t, dt, reason), appended.
+
+The appended files are fsynced before ``checkpoint.npz`` is replaced, and
+only the first records it counts are read back: a crash mid-write leaves a
+longer file whose tail is ignored and cut off by the next write. So the
+history is written once, not again at every checkpoint.
+
+Examples
+--------
+>>> import tempfile
+>>> import fem_elastic as fe
+>>> model = fe.Model(fe.beam_mesh(cells=(2, 1, 1)), density=1000.0,
+...                  body=fe.ElasticBody(fe.NeoHookean(E=1e5, nu=0.3)),
+...                  fixed="left", gravity=(0, 0, -9.81))
+>>> with tempfile.TemporaryDirectory() as tmp:
+...     full = fe.simulate(model, fe.Newmark(), 0.01, steps=6, checkpoint_dir=tmp,
+...                        checkpoint_every=2)
+...     ck = fe.load_checkpoint(tmp)
+>>> ck.step, ck.n_steps, ck.complete, ck.trajectory().times.size
+(6, 6, True, 7)
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io as _io
+import json
+import logging
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InvalidParameter
+from .io import _atomic_write, _fsync_directory
+from .state import State
+from .trajectory import COUNT_FIELDS, STEP_FIELDS, Trajectory
+
+__all__ = ["Checkpoint", "load_checkpoint", "CHECKPOINT_NAME"]
+
+log = logging.getLogger(__name__)
+
+CHECKPOINT_NAME = "checkpoint.npz"
+FRAMES_NAME = "frames.f64"
+STEPS_NAME = "steps.f64"
+CUTS_NAME = "cuts.jsonl"
+FORMAT = 1
+
+
+
+def _sha(*arrays) -> str:
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(str(a.dtype).encode() + str(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()[:20]
+
+
+def _settings(integrator) -> dict:
+    """The integrator's plain settings (numbers, strings, bools), for the fingerprint."""
+    out = {}
+    for k, v in sorted(vars(integrator).items()):
+        if k.startswith("_") or k == "last_stats":
+            continue
+        if isinstance(v, (bool, int, str)) or v is None:
+            out[k] = v
+        elif isinstance(v, float):
+            out[k] = v.hex()
+        else:
+            out[k] = type(v).__name__
+    return out
+
+
+def run_fingerprint(model, integrator, h, n_steps, record_every, state0, energy_growth) -> dict:
+    """What a checkpoint must match to be resumed: the model, the integrator and the run's settings.
+
+    Parameters
+    ----------
+    model : Model
+    integrator : Integrator
+    h : float
+        Time step (s).
+    n_steps, record_every : int
+    state0 : State
+        The initial state of the whole run.
+    energy_growth : float
+        simulate's divergence bound.
+
+    Returns
+    -------
+    dict
+        Plain values: class names and reprs of the body and of every term, hashes
+        of the reference positions, masses, held DOFs and loads, the integrator's
+        settings, and the run's dt, steps, recording interval, initial state and
+        energy bound.
+    """
+    dofs, xc, vc = model.constraints(state0.t)
+    return {
+        "ndofs": int(model.ndofs),
+        "body": repr(model.body),
+        "density": float(model.density).hex(),
+        "terms": [type(p).__name__ for p in model.potentials],
+        "damping": repr(model.damping),
+        "obstacles": [repr(o) for o in model.obstacles],
+        "driven": len(model.driven),
+        "model_arrays": _sha(model.X, model.lumped_mass, np.asarray(dofs), model.external_force()),
+        "integrator": getattr(integrator, "name", type(integrator).__name__),
+        "integrator_settings": _settings(integrator),
+        "dt": float(h).hex(),
+        "n_steps": int(n_steps),
+        "record_every": int(record_every),
+        "initial_state": _sha(state0.x, state0.v, np.array([state0.t])),
+        "energy_growth": float(energy_growth).hex() if math.isfinite(energy_growth) else "inf",
+    }
+
+
+@dataclass
+class Checkpoint:
+    """A checkpoint read back from a directory (:func:`load_checkpoint`).
+
+    Attributes
+    ----------
+    directory : pathlib.Path
+    step : int
+        Steps taken when it was written.
+    n_steps : int
+        Steps the run was asked for.
+    state : State
+        The state after ``step`` steps.
+    complete : bool
+        True when the run had finished (``step == n_steps``).
+    integrator_state : dict of numpy.ndarray
+        What the integrator remembered (:meth:`Integrator.checkpoint_state`).
+    fingerprint : dict
+        The run it belongs to (see :func:`run_fingerprint`).
+    e_ref, scale : float
+        The energy bound's reference (J) and scale (J) at that point.
+    driving : bool
+        Whether a driven boundary was moving at ``state.t``.
+    wall_time : float
+        Wall time of the run so far (s), over every session.
+    frames : numpy.ndarray
+        ``(n_frames, record)`` the recorded frames (see the module notes).
+    step_stats : dict of numpy.ndarray
+        ``(step,)`` per-step statistics.
+    cuts : list of dict
+        Failed attempts: ``step``, ``t`` (s), ``dt`` (s), ``reason``.
+    integrator : str
+        The integrator's name.
+    dt : float
+        Time step (s).
+    """
+
+    directory: Path
+    step: int
+    n_steps: int
+    state: State
+    integrator_state: dict
+    fingerprint: dict
+    e_ref: float
+    scale: float
+    driving: bool
+    wall_time: float
+    frames: np.ndarray
+    step_stats: dict
+    cuts: list = field(default_factory=list)
+    integrator: str = ""
+    dt: float = 0.0
+
+    @property
+    def complete(self) -> bool:
+        return self.step >= self.n_steps
+
+    @property
+    def time(self) -> float:
+        """Simulation time of the checkpoint (s)."""
+        return self.state.t
+
+    def trajectory(self) -> Trajectory:
+        """The frames recorded up to this checkpoint, as a :class:`Trajectory`."""
+        nv3 = (self.frames.shape[1] - 9) // 2
+        f = self.frames
+        kin, pot = f[:, 1].copy(), f[:, 2].copy()
+        traj = Trajectory(
+            times=f[:, 0].copy(), displacement=f[:, 9:9 + nv3].reshape(len(f), -1, 3),
+            velocity=f[:, 9 + nv3:].reshape(len(f), -1, 3), kinetic=kin, potential=pot,
+            total=kin + pot, linear_momentum=f[:, 3:6].copy(), angular_momentum=f[:, 6:9].copy(),
+            step_stats=dict(self.step_stats), wall_time=self.wall_time, steps=self.step,
+            dt=self.dt, integrator=self.integrator, final_state=self.state,
+            cuts=list(self.cuts),
+        )
+        traj.message = (f"completed {self.step} steps to t = {self.state.t:.6g} s" if self.complete
+                        else f"checkpoint after {self.step} of {self.n_steps} steps")
+        return traj
+
+
+def frame_record(t, u, v, kin, pot, lin, ang) -> np.ndarray:
+    """One ``frames.f64`` record from a frame's values (see the module notes)."""
+    return np.concatenate(([t, kin, pot], lin, ang, np.ravel(u), np.ravel(v)))
+
+
+def load_checkpoint(directory) -> Checkpoint:
+    """Read the last checkpoint in ``directory``.
+
+    Parameters
+    ----------
+    directory : str or os.PathLike
+        A ``checkpoint_dir`` of :func:`fe.simulate` (or ``RUN_DIR/checkpoint`` of a
+        ``fem-elastic run``).
+
+    Returns
+    -------
+    Checkpoint
+
+    Raises
+    ------
+    InvalidParameter
+        No checkpoint there, or one that cannot be read (its message says which file and why).
+    """
+    d = Path(directory)
+    path = d / CHECKPOINT_NAME
+    if not path.is_file():
+        raise InvalidParameter(
+            f"no checkpoint in {d} ({CHECKPOINT_NAME} is missing): a run writes one when it is "
+            "given checkpoint_dir (fe.simulate) or --checkpoint-every (fem-elastic run)."
+        )
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+        meta = json.loads(str(arrays.pop("meta")))
+        scalars = arrays.pop("scalars")
+        x, v = arrays.pop("x"), arrays.pop("v")
+    except (OSError, ValueError, KeyError, json.JSONDecodeError) as exc:
+        raise InvalidParameter(
+            f"the checkpoint {path} cannot be read ({type(exc).__name__}: {exc}); remove the "
+            "directory to start the run afresh."
+        ) from None
+    if meta.get("format") != FORMAT:
+        raise InvalidParameter(
+            f"the checkpoint {path} has format {meta.get('format')!r}, this version reads {FORMAT}; "
+            "remove it to start afresh."
+        )
+    t, e_ref, scale, wall = (float(s) for s in scalars)
+    integ = {k[len("integrator/"):]: a for k, a in arrays.items() if k.startswith("integrator/")}
+    n_frames, step = meta["n_frames"], meta["step"]
+    frames = _read_records(d / FRAMES_NAME, n_frames, meta["frame_size"])
+    steps = _read_records(d / STEPS_NAME, step, len(STEP_FIELDS))
+    stats = {}
+    for i, name in enumerate(STEP_FIELDS):
+        col = steps[:, i]
+        stats[name] = col.astype(np.int64) if name in COUNT_FIELDS else col.copy()
+    cuts = _read_cuts(d / CUTS_NAME, meta["n_cuts"])
+    return Checkpoint(
+        directory=d, step=step, n_steps=meta["n_steps"], state=State(x, v, t),
+        integrator_state=integ, fingerprint=meta["fingerprint"], e_ref=e_ref, scale=scale,
+        driving=bool(meta["driving"]), wall_time=wall, frames=frames, step_stats=stats, cuts=cuts,
+        integrator=meta["fingerprint"].get("integrator", ""),
+        dt=float.fromhex(meta["fingerprint"]["dt"]),
+    )
+
+
+def _read_records(path: Path, n: int, size: int) -> np.ndarray:
+    if n == 0:
+        return np.zeros((0, size))
+    try:
+        data = np.fromfile(path, dtype="<f8", count=n * size)
+    except OSError as exc:
+        raise InvalidParameter(f"the checkpoint's {path.name} cannot be read ({exc}).") from None
+    if data.size != n * size:
+        raise InvalidParameter(
+            f"{path} holds {data.size // max(size, 1)} records, the checkpoint counts {n}: the "
+            "directory is damaged; remove it to start afresh."
+        )
+    return data.reshape(n, size)
+
+
+def _read_cuts(path: Path, n: int) -> list:
+    if n == 0:
+        return []
+    with open(path, encoding="utf-8") as fh:
+        lines = [next(fh) for _ in range(n)]
+    return [json.loads(line) for line in lines]
+
+
+class Checkpointer:
+    """Writes the checkpoints of one run (used by :func:`fe.simulate`).
+
+    Parameters
+    ----------
+    directory : path-like
+        Created if missing.
+    every : int
+        Steps between periodic checkpoints (0: none; only on Ctrl-C and at the end).
+    fingerprint : dict
+        The run's description (:func:`run_fingerprint`).
+    frame_size : int
+        Floats per frame record.
+    resume : Checkpoint or None
+        The checkpoint the run continues from (its records are kept), or None
+        for a fresh run (earlier checkpoint files are removed).
+    """
+
+    def __init__(self, directory, every, fingerprint, frame_size, resume=None):
+        self.directory = Path(directory)
+        self.every = int(every)
+        self.fingerprint = fingerprint
+        self.frame_size = int(frame_size)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        if resume is None:
+            for name in (CHECKPOINT_NAME, FRAMES_NAME, STEPS_NAME, CUTS_NAME):
+                (self.directory / name).unlink(missing_ok=True)
+            self.n_frames = self.n_steps = self.n_cuts = 0
+        else:
+            self.n_frames, self.n_steps, self.n_cuts = len(resume.frames), resume.step, len(resume.cuts)
+        self.last_step = self.n_steps
+
+    def due(self, steps_done: int) -> bool:
+        """True when a periodic checkpoint is due after ``steps_done`` steps."""
+        return self.every > 0 and steps_done % self.every == 0
+
+    def write(self, snapshot, frames, stats, cuts) -> Path:
+        """Append the records since the last checkpoint, then replace ``checkpoint.npz``.
+
+        Parameters
+        ----------
+        snapshot : _Snapshot
+            The loop's consistent state after ``snapshot.step`` steps.
+        frames : list of numpy.ndarray
+            Every frame record of the run so far (at least ``snapshot.n_frames``).
+        stats : dict of numpy.ndarray
+            Per-step statistics of the whole run (the first ``snapshot.step`` are used).
+        cuts : list of dict
+            Every failed attempt so far (the first ``snapshot.n_cuts`` are used).
+        """
+        d = self.directory
+        k, nf, nc = snapshot.step, snapshot.n_frames, snapshot.n_cuts
+        self._append(d / FRAMES_NAME, self.n_frames, self.frame_size,
+                     frames[self.n_frames:nf])
+        rows = np.column_stack([np.asarray(stats[name][self.n_steps:k], dtype=float)
+                                for name in STEP_FIELDS]) if k > self.n_steps else []
+        self._append(d / STEPS_NAME, self.n_steps, len(STEP_FIELDS), rows)
+        self._append_cuts(d / CUTS_NAME, cuts[self.n_cuts:nc])
+        meta = {
+            "format": FORMAT, "step": k, "n_steps": self.fingerprint["n_steps"], "n_frames": nf,
+            "n_cuts": nc, "frame_size": self.frame_size, "driving": bool(snapshot.driving),
+            "fingerprint": self.fingerprint,
+        }
+        s = snapshot.state
+        arrays = {
+            "x": s.x, "v": s.v, "scalars": np.array([s.t, snapshot.e_ref, snapshot.scale, snapshot.wall_time]),
+            "meta": np.array(json.dumps(meta)),
+        }
+        for key, a in snapshot.integrator_state.items():
+            arrays[f"integrator/{key}"] = np.asarray(a)
+
+        def write(tmp):
+            buf = _io.BytesIO()
+            np.savez(buf, **arrays)
+            with open(tmp, "wb") as fh:
+                fh.write(buf.getvalue())
+
+        path = _atomic_write(d / CHECKPOINT_NAME, write)
+        self.n_frames, self.n_steps, self.n_cuts, self.last_step = nf, k, nc, k
+        log.debug("checkpoint after %d steps (t = %.6g s) in %s", k, s.t, d)
+        return path
+
+    @staticmethod
+    def _append(path: Path, n_done: int, size: int, records) -> None:
+        """Cut ``path`` to its first ``n_done`` records, append ``records`` and fsync."""
+        with open(path, "ab") as fh:
+            fh.truncate(n_done * size * 8)  # drop a tail a crash left behind
+            for r in records:
+                np.asarray(r, dtype="<f8").tofile(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+
+    def _append_cuts(self, path: Path, cuts) -> None:
+        lines = []
+        if path.exists():
+            with open(path, encoding="utf-8") as fh:
+                lines = [line for _, line in zip(range(self.n_cuts), fh)]
+        if len(lines) == self.n_cuts and not cuts and path.exists():
+            return
+        lines += [json.dumps(c) + "\n" for c in cuts]
+        with open(path, "w", encoding="utf-8") as fh:
+            fh.writelines(lines)
+            fh.flush()
+            os.fsync(fh.fileno())
+        _fsync_directory(path.parent)
+
+
+@dataclass
+class _Snapshot:
+    """The loop's state after ``step`` steps, consistent as a whole (see :func:`fe.simulate`)."""
+
+    step: int
+    state: State
+    n_frames: int
+    n_cuts: int
+    e_ref: float
+    scale: float
+    driving: bool
+    wall_time: float
+    integrator_state: dict
+
+
+def check_resumable(ck: Checkpoint, fingerprint: dict) -> None:
+    """:class:`InvalidParameter` unless ``ck`` was written by a run with this fingerprint."""
+    if ck.fingerprint == fingerprint:
+        return
+    diff = sorted(k for k in set(ck.fingerprint) | set(fingerprint)
+                  if ck.fingerprint.get(k) != fingerprint.get(k))
+    details = []
+    for k in diff[:4]:
+        a, b = ck.fingerprint.get(k), fingerprint.get(k)
+        if k in ("dt", "density", "energy_growth") and isinstance(a, str) and isinstance(b, str):
+            a, b = (float.fromhex(a) if a != "inf" else a), (float.fromhex(b) if b != "inf" else b)
+        details.append(f"{k}: checkpoint {a!r}, now {b!r}")
+    raise InvalidParameter(
+        f"the checkpoint in {ck.directory} was written by a different run ({'; '.join(details)}). "
+        "Resume with the same model, integrator, dt, steps, record_every and initial state, or "
+        "start afresh (resume=False, or remove the directory)."
+    )
