@@ -21,7 +21,7 @@ README = ROOT / "README.md"
 
 
 def _bad_inputs():
-    spec = importlib.util.spec_from_file_location("bad_inputs", ROOT / "tests" / "bad_inputs.py")
+    spec = importlib.util.spec_from_file_location("_bad_inputs_for_the_table", ROOT / "tests" / "bad_inputs.py")
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # dataclasses look their module up there
     spec.loader.exec_module(module)

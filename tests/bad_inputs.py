@@ -274,7 +274,7 @@ BAD_INPUTS: list[BadInput] = [
     BadInput("NaN in an initial velocity", lambda tmp: fe.State.rest(_model(), velocity=(0.0, 0.0, np.nan)), IP,
              "velocity has 1 NaN or infinite value(s)", "give finite values (m/s)"),
     BadInput("NaN in the positions of the state given to simulate", _nan_in_state, IP,
-             "NaN", "finite",
+             "NaN or infinite", "finite",
              xfail_reason="simulate's check_state (integrators/base.py) checks only the type and size: "
                           "the NaN state gets fe.Diverged 'an element is inverted at the start of the step'"),
     BadInput("an integrator class instead of an instance (fe.ImplicitEuler)",
@@ -339,8 +339,8 @@ BAD_INPUTS: list[BadInput] = [
                                     'type = "symplectic_euler"\n[time]\ndt = 0.02\nduration = 2.0\n'
                                     "[loads]\ngravity = [0.0, 0.0, -9.81]"), 1,
              "diverged at step", "smaller dt",
-             xfail_reason="the run's message (stdout table, summary.json, log) is the Diverged reason "
-                          "without the fix: runner.py keeps traj.message, not str(err)"),
+             xfail_reason="runner.run_variant builds the run's message (stdout, summary.json, log) from "
+                          "err.step, err.time and err.reason, dropping the fix str(err) names"),
 ]
 
 

@@ -9,6 +9,7 @@ input and what you get" must be exactly the one generated from the list.
 
 from __future__ import annotations
 
+import importlib.util
 import re
 import warnings
 from pathlib import Path
@@ -84,3 +85,19 @@ def test_readme_holds_the_generated_table():
         "README.md's table of bad inputs is not the one tests/bad_inputs.py generates; "
         "regenerate it with `python scripts/bad_inputs_table.py --write`"
     )
+
+
+def test_the_script_rewrites_only_between_the_markers(tmp_path):
+    spec = importlib.util.spec_from_file_location("bad_inputs_table", ROOT / "scripts" / "bad_inputs_table.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    readme = tmp_path / "README.md"
+    before, after = "# title\n\nintro\n\n", "\n## Layout\n\ntail\n"
+    readme.write_text(f"{before}{START_MARKER}\n| stale | table |\n{END_MARKER}{after}")
+    table = markdown_table()
+    assert script.write_readme(readme, table, START_MARKER, END_MARKER)
+    assert readme.read_text() == f"{before}{START_MARKER}\n{table}{END_MARKER}{after}"
+    assert not script.write_readme(readme, table, START_MARKER, END_MARKER)  # already up to date
+    readme.write_text(before + after)
+    with pytest.raises(SystemExit, match="needs exactly one"):
+        script.write_readme(readme, table, START_MARKER, END_MARKER)
