@@ -55,6 +55,16 @@ def _positive_int(text: str) -> int:
 # ---------------------------------------------------------------------------------- run / demo
 
 
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {value}")
+    return value
+
+
 def _tip_vertices(mesh):
     """Vertex indices of the beam's free end: the vertices of its boundary "right" (x = L)."""
     import numpy as np
@@ -66,15 +76,24 @@ def _tip_vertices(mesh):
 
 def _print_outcomes(out, outcomes, rendered, out_dir) -> None:
     out("")
-    out(f"{'variant':<12}{'status':<12}{'steps':>7}{'frames':>8}{'simulate (s)':>14}{'output (s)':>12}")
+    out(f"{'variant':<12}{'status':<12}{'steps':>7}{'cut':>6}{'frames':>8}{'simulate (s)':>14}{'output (s)':>12}")
     for o in outcomes:
         traj = o.trajectory
         steps = traj.steps if traj is not None else 0
+        cut = traj.dt_cuts if traj is not None else 0
         frames = traj.times.size if traj is not None else 0
-        out(f"{o.name:<12}{o.status:<12}{steps:>7d}{frames:>8d}{o.seconds_simulate:>14.2f}{o.seconds_output:>12.2f}")
+        out(f"{o.name:<12}{o.status:<12}{steps:>7d}{cut:>6d}{frames:>8d}{o.seconds_simulate:>14.2f}"
+            f"{o.seconds_output:>12.2f}")
     for o in outcomes:
+        traj = o.trajectory
         if o.status != "completed":
             out(f"{o.name}: {o.message}")
+        elif traj is not None and traj.resumed_from_step is not None:
+            out(f"{o.name}: resumed from its checkpoint at step {traj.resumed_from_step}")
+        if traj is not None and traj.cuts:
+            first = traj.cuts[0]
+            out(f"{o.name}: {traj.dt_cuts} steps cut ({len(traj.cuts)} failed attempts), the first at "
+                f"step {first['step']} (t = {first['t']:.6g} s, dt = {first['dt']:.3g} s): {first['reason']}")
     out("")
     out(f"written to {out_dir}/:")
     for o in outcomes:
@@ -107,10 +126,14 @@ def _run_scene_command(scene, args, out) -> int:
     try:
         outcomes, rendered = run_scene(
             scene, out_dir, variants=args.variant or None, progress=not args.quiet,
-            render=not args.no_render,
+            render=not args.no_render, checkpoint_every=args.checkpoint_every,
         )
     except SceneInterrupted as stop:
         return _interrupted(stop, out_dir, scene, time.perf_counter() - t0)
+    return _finish_scene_command(scene, out_dir, outcomes, rendered, t0, out)
+
+
+def _finish_scene_command(scene, out_dir, outcomes, rendered, t0, out) -> int:
     _write_scene_summary(out_dir, scene, outcomes, rendered, time.perf_counter() - t0)
     _print_outcomes(out, outcomes, rendered, out_dir)
     out(f"total {time.perf_counter() - t0:.1f} s")
@@ -146,12 +169,43 @@ def _write_scene_summary(out_dir, scene, outcomes, rendered, seconds, status=Non
 
 
 def _run(args) -> int:
+    from .errors import InvalidParameter
     from .scene import load_scene
 
     out = _Out(args.quiet)
+    if args.resume is not None:
+        if args.scene is not None or args.out is not None or args.variant or args.checkpoint_every is not None:
+            raise InvalidParameter(
+                "--resume DIR continues the run in DIR with the scene, variants and checkpoint "
+                "interval it was started with: give it alone (`fem-elastic run --resume DIR`)."
+            )
+        return _resume(args, out)
+    if args.scene is None or args.out is None:
+        raise InvalidParameter(
+            "give a scene and an output directory (`fem-elastic run SCENE.toml --out DIR`), or "
+            "`fem-elastic run --resume DIR` to continue a run."
+        )
     scene = load_scene(args.scene)
     out(f"scene {scene.name!r} from {args.scene}: variants {', '.join(scene.variants)}")
     return _run_scene_command(scene, args, out)
+
+
+def _resume(args, out) -> int:
+    from .runner import SceneInterrupted, read_resumable, run_scene
+
+    out_dir = Path(args.resume)
+    scene, record = read_resumable(out_dir)
+    out(f"resuming scene {scene.name!r} in {out_dir} from its checkpoints")
+    t0 = time.perf_counter()
+    try:
+        outcomes, rendered = run_scene(
+            scene, out_dir, variants=record.get("variants"), progress=not args.quiet,
+            render=False if args.no_render else record.get("render", True),
+            checkpoint_every=record.get("checkpoint_every"), resume=True,
+        )
+    except SceneInterrupted as stop:
+        return _interrupted(stop, out_dir, scene, time.perf_counter() - t0)
+    return _finish_scene_command(scene, out_dir, outcomes, rendered, t0, out)
 
 
 def _demo(args) -> int:
@@ -418,10 +472,18 @@ def _parser() -> argparse.ArgumentParser:
         description="Run a scene file: simulate each body variant, write VTU series and render.",
         epilog=_scene_help(),
     )
-    run.add_argument("scene", metavar="SCENE.toml", help="the scene file")
-    _add_run_options(run)
+    run.add_argument("scene", metavar="SCENE.toml", nargs="?", help="the scene file")
+    run.add_argument("--out", metavar="DIR", help="output directory (created)")
+    run.add_argument("--no-render", action="store_true",
+                     help="write the VTU series and summary only, no movie or PNG frames")
     run.add_argument("--variant", action="append", metavar="NAME",
                      help="run only this variant (repeatable; default all)")
+    run.add_argument("--checkpoint-every", type=_non_negative_int, metavar="N",
+                     help="write a checkpoint every N steps (default the scene's [output] "
+                          "checkpoint_every; checkpoints are always written on Ctrl-C and at the end)")
+    run.add_argument("--resume", metavar="DIR",
+                     help="continue the run whose output is in DIR from its last checkpoints; the "
+                          "result is bit for bit that of an uninterrupted run")
     _add_common(run)
     run.set_defaults(func=_run)
 

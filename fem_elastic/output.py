@@ -170,6 +170,11 @@ class SeriesWriter:
     compression : {"zlib", "lzma", None}
         Of the VTU arrays (:func:`fem_elastic.io.write_vtu_frame`): None
         writes ~7x faster and ~2x bigger files than zlib.
+    resume_from : Checkpoint, optional
+        Continue the series already in ``run_dir`` from this checkpoint of the
+        same run (:func:`fe.load_checkpoint`): its frames are kept, frames
+        written after it (by the run that was stopped) are removed, and the
+        next frame written is the checkpoint's next one.
 
     Attributes
     ----------
@@ -203,7 +208,7 @@ class SeriesWriter:
     """
 
     def __init__(self, model, run_dir, *, every: int = 1, n_steps: int | None = None,
-                 info: dict | None = None, compression: str | None = "zlib"):
+                 info: dict | None = None, compression: str | None = "zlib", resume_from=None):
         if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
             raise InvalidParameter(
                 f"every must be an integer >= 1 (steps per frame), got {every!r}."
@@ -231,11 +236,15 @@ class SeriesWriter:
         self._last_fields: dict | None = None
         self._last_state = None  # the last state seen (written or not) and its step
         self._last_step = -1
+        self._next_index = 0  # the number of the next frame file
         self._start = time.perf_counter()
         self.finished = False
         self.run_dir.mkdir(parents=True, exist_ok=True)
         (self.run_dir / FRAMES_DIR).mkdir(exist_ok=True)
-        self._clear_stale()
+        if resume_from is None:
+            self._clear_stale()
+        else:
+            self._keep(resume_from)
         self.seconds_output = time.perf_counter() - t0
 
     def _clear_stale(self):
@@ -247,6 +256,34 @@ class SeriesWriter:
             # the PVD first: from then on no reader sees a half-removed series as whole
             for p in stale:
                 p.unlink(missing_ok=True)
+
+    def _keep(self, ck):
+        """Keep the frames of checkpoint ``ck`` and remove what a stopped run wrote after it."""
+        times = [float(t) for t in ck.frames[:, 0]]
+        n = len(times)
+        (self.run_dir / SUMMARY_NAME).unlink(missing_ok=True)
+        for p in sorted((self.run_dir / FRAMES_DIR).glob("frame_*.vtu")):
+            try:
+                index = int(p.stem.split("_")[1])
+            except (IndexError, ValueError):
+                continue
+            if index >= n:
+                p.unlink(missing_ok=True)
+        entries = []
+        for i, t in enumerate(times):
+            name = f"{FRAMES_DIR}/{FRAME_PATTERN.format(i)}"
+            if (self.run_dir / name).is_file():
+                entries.append((t, name))
+            else:
+                log.warning("%s: frame %s of the checkpoint is missing; the series goes on without it",
+                            self.run_dir, name)
+        write_pvd(self.run_dir / PVD_NAME, entries)
+        # numbering goes on from the checkpoint's frame count even if a file was missing
+        self.frames = entries
+        self._next_index = n
+        self._last_state, self._last_step = ck.state, ck.step - 1
+        if n and times[-1] == ck.state.t:  # the summary's field ranges are the last frame's
+            self._last_fields = self.fields(ck.state.x)
 
     @property
     def steps_taken(self) -> int:
@@ -274,13 +311,14 @@ class SeriesWriter:
         u = m.to_vertices(state.x - m.X)  # the Trajectory's vertex displacement (m)
         v = m.to_vertices(state.v)
         fields = self.fields(state.x)
-        name = f"{FRAMES_DIR}/{FRAME_PATTERN.format(len(self.frames))}"
+        name = f"{FRAMES_DIR}/{FRAME_PATTERN.format(self._next_index)}"
         path = write_vtu_frame(self.run_dir / name, self._X + u, self._tets,
                                {"displacement": u, "velocity": v}, fields,
                                compression=self.compression)
         entries = self.frames + [(float(state.t), name)]
         write_pvd(self.run_dir / PVD_NAME, entries)
         self.frames = entries  # only now: a failed write leaves the series as it was
+        self._next_index += 1
         self._last_fields = fields
         if self._last_state is None:
             self._last_state = state

@@ -9,10 +9,18 @@ run directory per variant (``OUT/<variant>/series.pvd``, ``frames/``,
 
 A run that diverges or is interrupted (Ctrl-C) still leaves every frame
 written so far readable and a ``summary.json`` that says how it ended.
+
+Each run directory also holds ``checkpoint/`` (:mod:`fem_elastic.checkpoint`):
+written every ``[output] checkpoint_every`` steps, on Ctrl-C and at the end.
+The output directory keeps a copy of the scene (``scene.toml``) and how it was
+run (``run.json``), so ``fem-elastic run --resume OUT`` (:func:`resume_scene`)
+continues every variant from its last checkpoint, bit for bit as if it had
+never stopped.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from dataclasses import dataclass
@@ -22,7 +30,13 @@ from .errors import Diverged, InvalidParameter
 
 log = logging.getLogger(__name__)
 
-__all__ = ["RunOutcome", "SceneInterrupted", "run_scene", "run_variant", "render_outputs"]
+__all__ = ["RunOutcome", "SceneInterrupted", "run_scene", "run_variant", "render_outputs",
+           "read_resumable", "resume_scene", "CHECKPOINT_DIR"]
+
+#: The checkpoint directory inside a run directory.
+CHECKPOINT_DIR = "checkpoint"
+#: The copy of the scene, and how it was run, in an output directory (for --resume).
+SCENE_COPY, RUN_RECORD = "scene.toml", "run.json"
 
 
 @dataclass
@@ -77,7 +91,8 @@ class SceneInterrupted(KeyboardInterrupt):
         self.outcomes = list(outcomes) if outcomes is not None else [outcome]
 
 
-def run_variant(run, out_dir, *, progress: bool = False) -> RunOutcome:
+def run_variant(run, out_dir, *, progress: bool = False, checkpoint_every: int | None = None,
+                resume: bool = False) -> RunOutcome:
     """Simulate one built variant of a scene and write its series.
 
     Parameters
@@ -88,6 +103,12 @@ def run_variant(run, out_dir, *, progress: bool = False) -> RunOutcome:
         The scene's output directory; the run goes to ``out_dir / run.name``.
     progress : bool
         Show a tqdm progress bar.
+    checkpoint_every : int, optional
+        Steps between checkpoints (0: only on Ctrl-C and at the end); default
+        the scene's ``[output] checkpoint_every``.
+    resume : bool
+        Continue from the run directory's checkpoint (if it has one) and keep
+        the frames written up to it; else start afresh.
 
     Returns
     -------
@@ -98,19 +119,25 @@ def run_variant(run, out_dir, *, progress: bool = False) -> RunOutcome:
     Raises
     ------
     SceneInterrupted
-        On Ctrl-C, after the frames so far and ``summary.json`` are written.
+        On Ctrl-C, after the frames so far, a checkpoint and ``summary.json`` are written.
     """
+    from .checkpoint import CHECKPOINT_NAME, load_checkpoint
     from .output import SeriesWriter
     from .simulate import simulate
 
     run_dir = Path(out_dir) / run.name
-    writer = SeriesWriter(run.model, run_dir, every=run.record_every, info=run.info)
+    ck_dir = run_dir / CHECKPOINT_DIR
+    every = run.output.get("checkpoint_every", 0) if checkpoint_every is None else checkpoint_every
+    start = load_checkpoint(ck_dir) if resume and (ck_dir / CHECKPOINT_NAME).is_file() else None
+    writer = SeriesWriter(run.model, run_dir, every=run.record_every, info=run.info, resume_from=start)
     t0 = time.perf_counter()
-    writer.write_state(run.state)
+    if start is None:
+        writer.write_state(run.state)
     try:
         traj = simulate(
             run.model, run.integrator, run.dt, steps=run.steps, state=run.state,
             record_every=run.record_every, progress=progress, callback=writer.callback,
+            checkpoint_dir=ck_dir, checkpoint_every=every, resume=start is not None,
         )
     except Diverged as err:
         elapsed = time.perf_counter() - t0
@@ -121,7 +148,8 @@ def run_variant(run, out_dir, *, progress: bool = False) -> RunOutcome:
     except KeyboardInterrupt:
         elapsed = time.perf_counter() - t0
         msg = (f"interrupted after {writer.steps_taken} of {run.steps} steps; the frames written so far in "
-               f"{run_dir} are complete and readable")
+               f"{run_dir} are complete and readable, and `fem-elastic run --resume {Path(out_dir)}` "
+               "continues from the checkpoint")
         writer.finish(None, status="interrupted", message=msg)
         raise SceneInterrupted(
             RunOutcome(run.name, run_dir, "interrupted", msg, None, elapsed, writer.seconds_output, run)
@@ -165,7 +193,8 @@ def render_outputs(out_dir, run_dirs, output: dict, *, progress: bool = False) -
     return written
 
 
-def run_scene(scene, out_dir, *, variants=None, progress: bool = False, render: bool = True):
+def run_scene(scene, out_dir, *, variants=None, progress: bool = False, render: bool = True,
+              checkpoint_every: int | None = None, resume: bool = False):
     """Run every variant of a scene into ``out_dir`` and render them.
 
     Parameters
@@ -180,6 +209,10 @@ def run_scene(scene, out_dir, *, variants=None, progress: bool = False, render: 
         Progress bars.
     render : bool
         Render the formats the scene's ``[output].render`` lists.
+    checkpoint_every : int, optional
+        Steps between checkpoints; default the scene's ``[output] checkpoint_every``.
+    resume : bool
+        Continue each variant from its checkpoint (see :func:`resume_scene`).
 
     Returns
     -------
@@ -189,12 +222,15 @@ def run_scene(scene, out_dir, *, variants=None, progress: bool = False, render: 
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise InvalidParameter(f"--out {out_dir} is a file; give a directory for the run's output.")
+    runs = scene.build(variants)  # before touching the directory: a bad scene leaves it as it was
     out_dir.mkdir(parents=True, exist_ok=True)
-    runs = scene.build(variants)
+    if not resume:
+        _record_run(out_dir, scene, variants, render, checkpoint_every)
     outcomes = []
     for run in runs:
         try:
-            outcomes.append(run_variant(run, out_dir, progress=progress))
+            outcomes.append(run_variant(run, out_dir, progress=progress,
+                                        checkpoint_every=checkpoint_every, resume=resume))
         except SceneInterrupted as stop:
             raise SceneInterrupted(stop.outcome, outcomes + [stop.outcome]) from None
     rendered = []
@@ -211,6 +247,95 @@ def run_scene(scene, out_dir, *, variants=None, progress: bool = False, render: 
         for o in outcomes:
             _remove_series(o.run_dir)
     return outcomes, rendered
+
+
+def _record_run(out_dir: Path, scene, variants, render, checkpoint_every) -> None:
+    """Keep the scene's text and how it was run in ``out_dir``, for ``--resume``."""
+    from .io import write_text_atomic
+
+    source = Path(scene.source)
+    record = {
+        "format": 1,
+        "source": str(source.resolve()) if source.is_file() else str(scene.source),
+        "base_dir": str(Path(scene.base_dir).resolve()),
+        "variants": None if variants is None else list(variants),
+        "render": bool(render),
+        "checkpoint_every": checkpoint_every,
+    }
+    write_text_atomic(out_dir / SCENE_COPY, scene.text)
+    write_text_atomic(out_dir / RUN_RECORD, json.dumps(record, indent=2) + "\n")
+
+
+def read_resumable(out_dir):
+    """The scene an output directory was run with, and how (for :func:`resume_scene`).
+
+    Parameters
+    ----------
+    out_dir : path-like
+        The output directory of an earlier ``fem-elastic run`` or :func:`run_scene`.
+
+    Returns
+    -------
+    (Scene, dict)
+        The scene, read from the copy the run kept (``out_dir/scene.toml``, with
+        relative mesh paths resolved against the original scene's directory), and
+        the run's record: ``variants`` (None for all), ``render`` and ``checkpoint_every``.
+
+    Raises
+    ------
+    InvalidParameter
+        ``out_dir`` is not the output of a scene run.
+    """
+    from .scene import parse_scene
+
+    out_dir = Path(out_dir)
+    copy, record_path = out_dir / SCENE_COPY, out_dir / RUN_RECORD
+    if not (copy.is_file() and record_path.is_file()):
+        raise InvalidParameter(
+            f"{out_dir} is not the output directory of `fem-elastic run` (it has no {SCENE_COPY} and "
+            f"{RUN_RECORD}); give the --out directory of the run to resume."
+        )
+    try:
+        record = json.loads(record_path.read_text(encoding="utf-8"))
+        source, base_dir = str(record["source"]), str(record["base_dir"])
+    except (ValueError, KeyError, TypeError) as exc:
+        raise InvalidParameter(f"{record_path} cannot be read ({exc}); start the run afresh.") from None
+    scene = parse_scene(copy.read_text(encoding="utf-8"), source=source, base_dir=base_dir)
+    return scene, record
+
+
+def resume_scene(out_dir, *, progress: bool = False, render: bool | None = None):
+    """Continue a scene run in ``out_dir`` from its checkpoints (``fem-elastic run --resume``).
+
+    The scene, variants, rendering and checkpoint interval are those the run
+    was started with (:func:`read_resumable`). Variants with a checkpoint
+    continue from it (a finished one returns at once), the others start
+    afresh; the series and summaries end as those of an uninterrupted run.
+
+    Parameters
+    ----------
+    out_dir : path-like
+        The output directory of an earlier ``fem-elastic run`` or :func:`run_scene`.
+    progress : bool
+    render : bool, optional
+        Render afterwards; default as the run did.
+
+    Returns
+    -------
+    (list of RunOutcome, list of Path)
+        As :func:`run_scene`.
+
+    Raises
+    ------
+    InvalidParameter
+        ``out_dir`` is not the output of a scene run.
+    SceneInterrupted
+        On Ctrl-C (after a new checkpoint).
+    """
+    scene, record = read_resumable(out_dir)
+    render = record.get("render", True) if render is None else render
+    return run_scene(scene, out_dir, variants=record.get("variants"), progress=progress,
+                     render=render, checkpoint_every=record.get("checkpoint_every"), resume=True)
 
 
 def _remove_series(run_dir: Path) -> None:

@@ -357,6 +357,7 @@ def parse_scene(text: str, *, source: str = "<string>", base_dir=".") -> "Scene"
         variants=variants,
         base_dir=Path(base_dir),
         locations=locations,
+        text=text,
     )
 
 
@@ -503,6 +504,8 @@ class Scene:
     locations : dict
         1-based line of each table and key in the source, by path
         (``("compare", 0, "body", "E")``), for messages about the scene.
+    text : str
+        The TOML text it was parsed from (kept with a run's output, for ``--resume``).
     """
 
     name: str
@@ -512,6 +515,7 @@ class Scene:
     variants: list = field(default_factory=list)
     base_dir: Path = Path(".")
     locations: dict = field(default_factory=dict, repr=False, compare=False)
+    text: str = field(default="", repr=False, compare=False)
 
     # errors at build time, placed in the file ---------------------------------------
     def _error(self, path: tuple, message: str, suggestion: str | None = None) -> SceneError:
