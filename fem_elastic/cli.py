@@ -86,9 +86,7 @@ def _print_outcomes(out, outcomes, rendered, out_dir) -> None:
             f"{o.seconds_output:>12.2f}")
     for o in outcomes:
         traj = o.trajectory
-        if o.status != "completed":
-            out(f"{o.name}: {o.message}")
-        elif traj is not None and traj.resumed_from_step is not None:
+        if o.status == "completed" and traj is not None and traj.resumed_from_step is not None:
             out(f"{o.name}: resumed from its checkpoint at step {traj.resumed_from_step}")
         if traj is not None and traj.cuts:
             first = traj.cuts[0]
@@ -100,6 +98,9 @@ def _print_outcomes(out, outcomes, rendered, out_dir) -> None:
         out(f"  {o.run_dir.name}/series.pvd   (VTU series: open in ParaView), {o.run_dir.name}/summary.json")
     for p in _collapse_pngs(rendered, out_dir):
         out(f"  {p}")
+    for o in outcomes:  # a failed run says why, on stderr, even with --quiet
+        if o.status != "completed":
+            sys.stderr.write(f"fem-elastic: {o.name}: {o.message}\n")
 
 
 def _collapse_pngs(paths, out_dir):
@@ -551,6 +552,7 @@ def main(argv=None) -> int:
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
     )
+    logging.captureWarnings(True)  # a StabilityWarning reads as a message, not a source line
     if args.command is None:
         parser.print_help()
         return _EXIT_USAGE

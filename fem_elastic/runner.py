@@ -141,9 +141,9 @@ def run_variant(run, out_dir, *, progress: bool = False, checkpoint_every: int |
         )
     except Diverged as err:
         elapsed = time.perf_counter() - t0
-        msg = f"diverged at step {err.step} (t = {err.time:.6g} s): {err.reason}"
+        msg = str(err)  # where, why, and what to try
         writer.finish(err.trajectory, status="diverged", message=msg, final_state=err.last_good_state)
-        log.warning("%s: %s", run.name, msg)
+        log.info("%s: %s", run.name, msg)  # the caller reports it (the command on stderr)
         return RunOutcome(run.name, run_dir, "diverged", msg, err.trajectory, elapsed, writer.seconds_output, run)
     except KeyboardInterrupt:
         elapsed = time.perf_counter() - t0

@@ -153,6 +153,11 @@ def simulate(
         raise InvalidParameter(f"record_every must be an integer >= 1, got {record_every!r}.")
     if not (isinstance(energy_growth, (int, float)) and energy_growth > 0):
         raise InvalidParameter(f"energy_growth must be a number > 0, got {energy_growth!r}.")
+    if isinstance(integrator, type):
+        raise InvalidParameter(
+            f"integrator must be an instance, e.g. fe.{integrator.__name__}(), not the class "
+            f"{integrator.__name__}."
+        )
     if not hasattr(integrator, "step"):
         raise InvalidParameter(
             f"integrator must be e.g. fe.ImplicitEuler() or fe.SymplecticEuler(), got {integrator!r}."
@@ -399,10 +404,16 @@ class _Recorder:
 def _diverged(reason, k, state, rec, stats, n_done, t_start, integrator, h, cuts, detail=None, wall0=0.0):
     traj = rec.trajectory(stats, n_done, wall0 + time.perf_counter() - t_start, integrator, h, state, cuts)
     traj.message = f"diverged at step {k}: {reason}"
+    if getattr(integrator, "explicit", True):
+        advice = "Try a smaller dt, an implicit integrator (fe.ImplicitEuler), or damping."
+    elif detail:  # an implicit scheme's own failure carries its advice
+        advice = ""
+    else:
+        advice = "Try a smaller dt or damping."
     err = Diverged(
         f"the simulation diverged at step {k} (t = {state.t:.6g} s): {(detail or reason).rstrip('.')}. The last "
         "good state and the frames recorded so far are attached (err.last_good_state, "
-        "err.trajectory). Try a smaller dt, an implicit integrator (fe.ImplicitEuler), or damping.",
+        f"err.trajectory). {advice}".rstrip(),
         step=k, time=state.t, reason=reason, last_good_state=state,
     )
     err.trajectory = traj

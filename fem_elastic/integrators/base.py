@@ -41,6 +41,16 @@ def check_state(model, state) -> None:
             f"the state has {state.x.size} DOFs but the model has {model.ndofs}; "
             "build it with fe.State.rest(model, ...)."
         )
+    bad = np.count_nonzero(~np.isfinite(state.x)) + np.count_nonzero(~np.isfinite(state.v))
+    if bad:
+        raise InvalidParameter(
+            f"the state has {bad} NaN or infinite position/velocity value(s); give a state with "
+            "finite values (fe.State.rest(model, ...), or err.last_good_state of a run that diverged)."
+        )
+
+
+#: dt^2 below this is subnormal or zero: 1/dt^2 overflows or loses its precision.
+_DT2_MIN = np.finfo(float).tiny
 
 
 def check_dt(dt) -> float:
@@ -48,6 +58,11 @@ def check_dt(dt) -> float:
     if isinstance(dt, bool) or not isinstance(dt, numbers.Real) or not math.isfinite(dt) or dt <= 0:
         raise InvalidParameter(
             f"the time step dt must be a finite number > 0 (s), got {dt!r}; e.g. dt=1e-3."
+        )
+    if float(dt) ** 2 < _DT2_MIN:
+        raise InvalidParameter(
+            f"the time step dt = {dt!r} s is too small: implicit schemes divide by dt^2, which "
+            f"underflows below {math.sqrt(_DT2_MIN):.0e} s; use a dt of at least that (e.g. dt=1e-6)."
         )
     return float(dt)
 
