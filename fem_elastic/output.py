@@ -269,14 +269,16 @@ class SeriesWriter:
                 continue
             if index >= n:
                 p.unlink(missing_ok=True)
-        entries = []
+        entries, missing = [], []
         for i, t in enumerate(times):
             name = f"{FRAMES_DIR}/{FRAME_PATTERN.format(i)}"
             if (self.run_dir / name).is_file():
                 entries.append((t, name))
             else:
-                log.warning("%s: frame %s of the checkpoint is missing; the series goes on without it",
-                            self.run_dir, name)
+                missing.append(name)
+        if missing:  # removed by hand, or by [output] vtu = false after a finished run
+            log.warning("%s: %d of the checkpoint's %d frames are missing (first %s); the series goes "
+                        "on without them", self.run_dir, len(missing), n, missing[0])
         write_pvd(self.run_dir / PVD_NAME, entries)
         # numbering goes on from the checkpoint's frame count even if a file was missing
         self.frames = entries

@@ -160,3 +160,18 @@ def test_checkpoint_every_from_the_command_line(tmp_path):
 
     ck = load_checkpoint(out / "fem" / "checkpoint")
     assert ck.complete and ck.step == 20
+
+
+def test_resume_after_frames_were_removed_keeps_the_rest(tmp_path, caplog):
+    """A frame deleted by hand is left out of the series, with one warning, and numbering goes on."""
+    scene = _scene(tmp_path)
+    out = tmp_path / "o"
+    assert cli.main(["run", str(scene), "--out", str(out), "-q", "--variant", "fem"]) == 0
+    (out / "fem" / "frames" / "frame_000003.vtu").unlink()
+    (out / "fem" / "frames" / "frame_000004.vtu").unlink()
+    with caplog.at_level("WARNING"):
+        assert cli.main(["run", "--resume", str(out), "-q"]) == 0
+    warned = [r for r in caplog.records if "frames are missing" in r.getMessage()]
+    assert len(warned) == 1 and "2 of the checkpoint's 11 frames" in warned[0].getMessage()
+    series = read_series(out / "fem")
+    assert series.times.size == 9 and series.files[-1].name == "frame_000010.vtu"
