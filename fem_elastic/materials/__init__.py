@@ -13,6 +13,14 @@ shape ``(3, 3, ...)`` (scikit-fem's layout):
 All nonlinear materials linearize at ``F = I`` to :class:`LinearElastic` with
 the same (mu, lam).
 
+At any finite F, ``psi`` is finite or ``+inf``, never NaN or ``-inf``: ``+inf``
+where the state is inadmissible (:class:`NeoHookean` at ``det F <= 0``) or where
+the energy's terms overflow the float range (each energy grows at least like
+``|F|^2``, so it is then beyond ~1e308 J/m^3 itself; NaN, from ``inf - inf`` with
+a negative Lame parameter, would poison sums and comparisons). ``tests/
+test_fuzz_materials.py`` checks this, and the derivatives against finite
+differences, at random F from near-singular to inverted to 100x stretched.
+
 Examples
 --------
 >>> import numpy as np

@@ -180,6 +180,61 @@ def _det(F: np.ndarray, K: np.ndarray | None = None) -> np.ndarray:
     return F[0, 0] * K[0, 0] + F[0, 1] * K[0, 1] + F[0, 2] * K[0, 2]
 
 
+def _scaled_det(F: np.ndarray, idx: np.ndarray):
+    """``ln |det F|``, ``sign det F`` and ``F^-T`` at the points ``idx`` through ``F / c``.
+
+    ``c = max |F_ij|`` per point: ``det(F / c)`` and ``cof(F / c)`` are O(1) at most,
+    so they neither over- nor underflow, and ``ln |J| = 3 ln c + ln |det(F / c)|``,
+    ``F^-T = cof(F / c) / (det(F / c) c)``. Used where ``J`` itself left the float
+    range (``|F|`` beyond ~1e102 or below ~1e-102), so that an energy that is
+    representable is not turned into NaN or +-inf by its intermediate ``J``.
+
+    Parameters
+    ----------
+    F : numpy.ndarray, shape (3, 3, N)
+        Deformation gradients.
+    idx : numpy.ndarray of int
+        The points to redo.
+
+    Returns
+    -------
+    log_abs_J, sign, G : numpy.ndarray
+        Shapes ``(len(idx),)``, ``(len(idx),)`` (+1, -1 or 0) and ``(3, 3, len(idx))``.
+    """
+    Fi = F[..., idx]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c = np.abs(Fi).max(axis=(0, 1))
+        Fh = Fi / c
+        Kh = _cofactor(Fh)
+        Jh = _det(Fh, Kh)
+        log_abs_J = 3.0 * np.log(c) + np.log(np.abs(Jh))
+        G = Kh / (Jh * c)
+    return log_abs_J, np.sign(Jh), G
+
+
+def _out_of_range(J: np.ndarray) -> np.ndarray:
+    """Indices where ``J`` is not a normal float: 0 or subnormal (underflow), +-inf
+    (overflow) or NaN (``inf - inf`` in the expansion of det F)."""
+    a = np.abs(J)
+    return np.flatnonzero(~((a >= np.finfo(float).tiny) & (a < np.inf)))
+
+
+def _overflow_to_inf(out: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Energies that came out NaN at finite F set to +inf, in place; returns ``out``.
+
+    Each energy here is a sum of terms whose sum is positive and grows like ``|F|^2``
+    or faster; NaN at finite F is ``inf - inf`` (a positive term overflowed and a
+    negative one, of a negative Lame parameter or a logarithm, did too), i.e. an
+    energy beyond the float range. +inf says so (and keeps comparisons and sums
+    meaningful), where NaN would poison them.
+    """
+    bad = np.isnan(out)
+    if bad.any():
+        bad &= np.isfinite(F).all(axis=(0, 1))
+        out[bad] = np.inf
+    return out
+
+
 def _outer(A: np.ndarray, B: np.ndarray, scale=1.0) -> np.ndarray:
     """(scale A)_ij B_kl of (3, 3, N) arrays, as a new (3, 3, 3, 3, N) array."""
     return (scale * A)[:, :, None, None] * B[None, None]

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import _flat
+from .base import _flat, _overflow_to_inf
 from .isotropic import PAIRS, IsotropicMaterial, isotropic_hessian
 from .svd import signed_svd
 
@@ -81,8 +81,9 @@ class Corotated(IsotropicMaterial):
         _, s, _ = signed_svd(F)
         d = s - 1.0
         tr = d[0] + d[1] + d[2]
-        out = self.mu * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) + 0.5 * self.lam * tr * tr
-        return out.reshape(batch)
+        with np.errstate(invalid="ignore", over="ignore"):
+            out = self.mu * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) + 0.5 * self.lam * tr * tr
+        return _overflow_to_inf(out, F).reshape(batch)
 
     def dpsi_dF(self, F: np.ndarray) -> np.ndarray:
         """First Piola-Kirchhoff stress ``2 mu (F - R) + lam tr(R^T F - I) R`` (Pa).

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import Material, _flat
+from .base import Material, _flat, _overflow_to_inf
 
 __all__ = ["LinearElastic"]
 
@@ -82,7 +82,9 @@ class LinearElastic(Material):
         e01, e02, e12 = F[0, 1] + F[1, 0], F[0, 2] + F[2, 0], F[1, 2] + F[2, 1]  # 2 eps_ij
         tr = e00 + e11 + e22
         epseps = e00 * e00 + e11 * e11 + e22 * e22 + 0.5 * (e01 * e01 + e02 * e02 + e12 * e12)
-        return (mu * epseps + 0.5 * lam * tr * tr).reshape(batch)
+        with np.errstate(invalid="ignore", over="ignore"):
+            out = mu * epseps + 0.5 * lam * tr * tr
+        return _overflow_to_inf(out, F).reshape(batch)
 
     def dpsi_dF(self, F: np.ndarray) -> np.ndarray:
         """First Piola-Kirchhoff stress ``P = 2 mu eps + lam tr(eps) I``.

@@ -10,6 +10,11 @@ Only defined for ``J > 0``: ``psi`` is ``+inf`` for ``J <= 0`` (an inverted
 element is inadmissible, and a line search backs off), while ``P`` and ``C``
 are NaN there (no warning is raised). Use :class:`StableNeoHookean` where
 inversion must be recoverable.
+
+Where ``J`` itself leaves the float range while the energy does not (``F = 1e110 I``:
+``J = 1e330`` overflows but ``psi ~ mu |F|^2 / 2 = 1.5e220 mu``; ``F = 1e-110 I``:
+``J`` underflows to 0 but ``ln J = -760``), ``ln J`` and ``F^-T`` are computed from
+``F / max |F_ij|`` instead, so psi, P and C stay finite and correct there.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import _add_identity_term, _cofactor, _det, _flat, _outer
+from .base import _add_identity_term, _cofactor, _det, _flat, _out_of_range, _outer, _scaled_det
 from .isotropic import PAIRS, IsotropicMaterial
 
 __all__ = ["NeoHookean"]
@@ -48,11 +53,16 @@ class NeoHookean(IsotropicMaterial):
     """
 
     def _invariants(self, F):
-        K = _cofactor(F)
-        J = _det(F, K)
+        with np.errstate(over="ignore", invalid="ignore"):
+            K = _cofactor(F)
+            J = _det(F, K)
         with np.errstate(divide="ignore", invalid="ignore"):
             lnJ = np.log(J)
             G = K / J
+        odd = _out_of_range(J)
+        if odd.size:  # J over- or underflowed: ln J and F^-T through F / max |F_ij|
+            log_abs_J, sign, G[..., odd] = _scaled_det(F, odd)
+            lnJ[odd] = np.where(sign > 0, log_abs_J, np.nan)
         return J, lnJ, G
 
     def psi(self, F: np.ndarray) -> np.ndarray:
@@ -75,12 +85,20 @@ class NeoHookean(IsotropicMaterial):
         inf
         """
         F, batch = _flat(F)
-        J = _det(F)
-        I1 = np.einsum("ijn,ijn->n", F, F)
+        with np.errstate(over="ignore", invalid="ignore"):
+            J = _det(F)
+            I1 = np.einsum("ijn,ijn->n", F, F)
         with np.errstate(divide="ignore", invalid="ignore"):
             lnJ = np.log(J)
+        admissible = J > 0.0
+        odd = _out_of_range(J)
+        if odd.size:  # J over- or underflowed: ln J through F / max |F_ij|
+            log_abs_J, sign, _ = _scaled_det(F, odd)
+            admissible[odd] = sign > 0
+            lnJ[odd] = log_abs_J
+        with np.errstate(invalid="ignore", over="ignore"):
             out = 0.5 * self.mu * (I1 - 3.0) - self.mu * lnJ + 0.5 * self.lam * lnJ * lnJ
-        out[~(J > 0.0)] = np.inf
+        out[~admissible] = np.inf
         return out.reshape(batch)
 
     def dpsi_dF(self, F: np.ndarray) -> np.ndarray:

@@ -28,6 +28,7 @@ from .base import (
     _det,
     _flat,
     _outer,
+    _overflow_to_inf,
 )
 from .isotropic import PAIRS, IsotropicMaterial
 
@@ -103,12 +104,13 @@ class StableNeoHookean(IsotropicMaterial):
         IC = np.einsum("ijn,ijn->n", F, F)
         dJ = _det(F) - self.alpha
         d0 = 1.0 - self.alpha  # J - alpha at rest
-        out = (
-            0.5 * mu_ * (IC - 3.0)
-            + 0.5 * lam_ * (dJ - d0) * (dJ + d0)
-            - 0.5 * mu_ * np.log1p((IC - 3.0) / 4.0)  # ln((I_C + 1) / 4)
-        )
-        return out.reshape(batch)
+        with np.errstate(invalid="ignore", over="ignore"):
+            out = (
+                0.5 * mu_ * (IC - 3.0)
+                + 0.5 * lam_ * (dJ - d0) * (dJ + d0)
+                - 0.5 * mu_ * np.log1p((IC - 3.0) / 4.0)  # ln((I_C + 1) / 4)
+            )
+        return _overflow_to_inf(out, F).reshape(batch)
 
     def dpsi_dF(self, F: np.ndarray) -> np.ndarray:
         """First Piola-Kirchhoff stress ``mu' (1 - 1/(I_C + 1)) F + lam' (J - alpha) cof F`` (Pa).

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import _flat, _outer, _right_cauchy_green
+from .base import _flat, _outer, _overflow_to_inf, _right_cauchy_green
 from .isotropic import PAIRS, IsotropicMaterial
 
 __all__ = ["StVK"]
@@ -75,7 +75,9 @@ class StVK(IsotropicMaterial):
         e00, e11, e22 = 0.5 * (A[0, 0] - 1.0), 0.5 * (A[1, 1] - 1.0), 0.5 * (A[2, 2] - 1.0)
         tr = e00 + e11 + e22
         EE = e00 * e00 + e11 * e11 + e22 * e22 + 0.5 * (A[0, 1] ** 2 + A[0, 2] ** 2 + A[1, 2] ** 2)
-        return (self.mu * EE + 0.5 * self.lam * tr * tr).reshape(batch)
+        with np.errstate(invalid="ignore", over="ignore"):
+            out = self.mu * EE + 0.5 * self.lam * tr * tr
+        return _overflow_to_inf(out, F).reshape(batch)
 
     def dpsi_dF(self, F: np.ndarray) -> np.ndarray:
         """First Piola-Kirchhoff stress ``P = F (2 mu E + lam tr(E) I)`` (Pa).
