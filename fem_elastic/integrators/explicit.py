@@ -175,29 +175,38 @@ class _Explicit(Integrator):
         self._scale_of = (None, 0.0)  # (model, its load and round-off energy scale): a cache
 
     def checkpoint_state(self, state: State) -> dict:
-        """The sub-stepping memory: critical step, sub-step limit, steps since the estimate.
+        """The sub-stepping memory, for a checkpoint at ``state``.
 
         Returns
         -------
         dict of str to numpy.ndarray
-            ``{"dt_crit": (s), "h_max": (s), "since_estimate": int}``; empty
+            ``dt_crit`` (s, the last estimate), ``h_max`` (s, the sub-step
+            limit in force), ``since_estimate`` (steps), ``energy_anchor``
+            (the judged energy (J), its scale (J) and sub-step (s) the steps
+            are held to; NaN when none) and, for symplectic Euler, ``gradient``
+            (N, dPi/dx at ``state.x``, which its next step reuses; so the
+            resumed run's force count is the uninterrupted one's too). Empty
             without ``substep`` or before the first step.
         """
         if not self.substep or self._dt_crit is None:
             return {}
         anchor = np.full(3, np.nan) if self._anchor is None else np.array(self._anchor, dtype=float)
-        return {"dt_crit": np.array(self._dt_crit), "h_max": np.array(self._h_max),
-                "since_estimate": np.array(self._since, dtype=np.int64), "energy_anchor": anchor}
+        out = {"dt_crit": np.array(self._dt_crit), "h_max": np.array(self._h_max),
+               "since_estimate": np.array(self._since, dtype=np.int64), "energy_anchor": anchor}
+        at, g = self._gradient
+        if at is state.x:
+            out["gradient"] = g.copy()
+        return out
 
     def restore_state(self, state: State, saved: dict) -> None:
         """Take back what :meth:`checkpoint_state` returned (an empty dict starts afresh)."""
         if not self.substep:
             return super().restore_state(state, saved)
         keys = {"dt_crit", "h_max", "since_estimate", "energy_anchor"}
-        if set(saved) - keys or (saved and set(saved) != keys):
+        if saved and not keys <= set(saved) <= keys | {"gradient"}:
             raise InvalidParameter(
-                f"{self.name}(substep=True) restores {sorted(keys)} from a checkpoint, got "
-                f"{sorted(saved)}: it was written by another integrator."
+                f"{self.name}(substep=True) restores {sorted(keys)} (and a gradient) from a "
+                f"checkpoint, got {sorted(saved)}: it was written by another integrator."
             )
         self._forget()
         if not saved:
@@ -205,14 +214,20 @@ class _Explicit(Integrator):
         dt_crit, h_max = float(saved["dt_crit"]), float(saved["h_max"])
         since = int(saved["since_estimate"])
         anchor = np.asarray(saved["energy_anchor"], dtype=float)
-        if not (dt_crit > 0 and h_max > 0 and since >= 0 and anchor.shape == (3,)):
+        g = np.array(saved["gradient"], dtype=float) if "gradient" in saved else None
+        if not (dt_crit > 0 and h_max > 0 and since >= 0 and anchor.shape == (3,)
+                and (g is None or g.shape == state.x.shape)):
             raise InvalidParameter(
                 f"the checkpoint's sub-stepping state is invalid (dt_crit = {dt_crit!r} s, "
                 f"h_max = {h_max!r} s, since_estimate = {since}, energy_anchor of shape "
-                f"{anchor.shape}): it is damaged; resume from an earlier checkpoint."
+                f"{anchor.shape}, gradient of shape {None if g is None else g.shape} for "
+                f"{state.x.size} DOFs): it is damaged or of another model; resume from an earlier "
+                "checkpoint."
             )
         self._dt_crit, self._h_max, self._since = dt_crit, h_max, since
         self._anchor = None if np.isnan(anchor).any() else tuple(float(a) for a in anchor)
+        if g is not None:
+            self._gradient = (state.x, g)
 
     # -- the scheme ------------------------------------------------------------------------
     def step(self, model, state: State, dt: float) -> State:
@@ -306,9 +321,11 @@ class _Explicit(Integrator):
             return energies
         vg = None
         if self._modified_energy:
-            g = model.gradient(state.x)
-            stats.gradient_evaluations += 1
-            self._gradient = (state.x, g)
+            at, g = self._gradient
+            if at is not state.x:
+                g = model.gradient(state.x)
+                stats.gradient_evaluations += 1
+                self._gradient = (state.x, g)
             vg = float(state.v @ g)
         return model.kinetic_energy(state.v, "lumped"), model.energy(state.x), vg
 
