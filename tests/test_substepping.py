@@ -323,3 +323,16 @@ def test_a_resumed_substepped_run_is_the_uninterrupted_one(sagging, tmp_path):
     for name in ("substeps", "dt_cuts", "gradient_evaluations"):
         assert np.array_equal(full.step_stats[name], resumed.step_stats[name]), name
     assert full.cuts == resumed.cuts
+
+
+def test_an_integrator_moved_to_another_model_forgets_the_first(sagging):
+    """Its estimate, sub-step and remembered energies belong to the model they were taken on."""
+    model, dt_crit, dt = sagging
+    stiff = _beam(fe.NeoHookean(E=4e5, nu=0.3), gravity=(0.0, 0.0, -9.81))  # omega_max x2
+    se = SE(substep=True)
+    s = se.step(model, fe.State.rest(model), dt)
+    assert se.last_stats.substeps == math.ceil(10.0 / 0.8)
+    se.step(stiff, s, dt)  # the same state object, a model twice as fast
+    assert se.last_stats.cuts == []  # estimated afresh, not found out by a failed attempt
+    assert se.last_stats.substeps == math.ceil(dt / (0.8 * fe.critical_time_step(stiff, SE(), x=s.x)))
+    assert se.last_stats.substeps >= 2 * math.ceil(10.0 / 0.8) - 1

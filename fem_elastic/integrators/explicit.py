@@ -172,6 +172,7 @@ class _Explicit(Integrator):
         self._anchor = None  # (judged energy (J), energy scale (J), sub-step (s)) the steps are held to
         self._last_energy = (None, None)  # (state returned last, its energies: see _energies)
         self._gradient = (None, None)  # (positions, dPi/dx there): for the next force evaluation
+        self._model = None  # the model all this is of (None: the next one stepped, e.g. after a restore)
         self._scale_of = (None, 0.0)  # (model, its load and round-off energy scale): a cache
 
     def checkpoint_state(self, state: State) -> dict:
@@ -357,6 +358,10 @@ class _Explicit(Integrator):
         return ""
 
     def _substepped(self, model, state, h, stats) -> State:
+        if self._model is not model:  # the memory is of another model: start afresh
+            if self._model is not None:
+                self._forget()
+            self._model = model
         t0 = state.t
         start = self._energies(model, state, stats)
         if not math.isfinite(start[0] + start[1]):
