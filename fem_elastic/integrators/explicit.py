@@ -123,15 +123,19 @@ class _Explicit(Integrator):
     Parameters
     ----------
     substep : bool
-        Take each step as ``n`` stable sub-steps (see the module notes); False: one step of dt.
+        Take each step as ``n`` stable sub-steps (see the module notes); False
+        (default): one step of dt, limited by the critical time step.
     safety : float
-        Fraction of the critical time step a sub-step may use, in (0, 1].
+        Fraction of the critical time step a sub-step may use, in (0, 1];
+        default 0.8 (why: the module notes).
     recheck_every : int
         Steps between re-estimates of the critical time step at the current
-        configuration, >= 1 (only with ``substep``).
+        configuration, >= 1; default :data:`RECHECK_EVERY` (only with ``substep``).
     max_substeps : int
         Most sub-steps in one step, >= 1; a step that needs more raises
-        :class:`fe.Diverged` (only with ``substep``).
+        :class:`fe.Diverged` (only with ``substep``). The default, 1000, is a
+        dt a thousand times the stable one: past it an implicit integrator
+        is the cheaper tool.
     """
 
     explicit = True
