@@ -181,8 +181,21 @@ def _body_damping_beta(model, x, omega_max) -> float:
     if idx.size <= _DENSE_MAX:
         c_max = float(sla.eigh(A.toarray(), eigvals_only=True)[-1])
     else:
-        c_max = float(spla.eigsh(A, k=1, which="LA", tol=1e-8, return_eigenvectors=False)[0])
+        c_max = float(spla.eigsh(A, k=1, which="LA", tol=1e-8, return_eigenvectors=False,
+                                 v0=_start_vector(A.shape[0]))[0])
     return max(c_max, 0.0) / omega_max**2
+
+
+def _start_vector(n: int) -> np.ndarray:
+    """A fixed Lanczos start vector of length n (a seeded normal draw).
+
+    ARPACK otherwise starts from its own random vector, and the same problem
+    then gives estimates that differ in the last bits from call to call: a
+    sub-stepping integrator's step count, and so a resumed run, would depend
+    on it. A random-looking vector (not e.g. all ones) has a component along
+    every mode almost surely.
+    """
+    return np.random.default_rng(20261121).standard_normal(n)
 
 
 # -- public -------------------------------------------------------------------------------------
@@ -267,7 +280,7 @@ def natural_frequencies(model, n: int = 6, *, x=None, mass: str = "consistent", 
         lam, phi = sla.eigh(K.toarray(), Mf.toarray(), subset_by_index=[0, n - 1])
     else:
         sigma = -_FREE_SHIFT * scale if _is_free_body(model) else 0.0
-        lam, phi = spla.eigsh(K, k=n, M=Mf, sigma=sigma, which="LM")
+        lam, phi = spla.eigsh(K, k=n, M=Mf, sigma=sigma, which="LM", v0=_start_vector(nfree))
     order = np.argsort(lam)
     lam, phi = lam[order], phi[:, order]
     bad = lam < -_NEGATIVE_TOL * scale
@@ -350,9 +363,11 @@ def max_frequency(model, *, x=None, mass: str = "lumped", upper_bound: bool = Fa
     elif M is None:
         s = sp.diags(1.0 / np.sqrt(m_lumped))
         A = (s @ K @ s).tocsr()
-        lam = float(spla.eigsh(A, k=1, which="LA", tol=1e-10, return_eigenvectors=False)[0])
+        lam = float(spla.eigsh(A, k=1, which="LA", tol=1e-10, return_eigenvectors=False,
+                               v0=_start_vector(A.shape[0]))[0])
     else:
-        lam = float(spla.eigsh(K, k=1, M=M, which="LA", tol=1e-10, return_eigenvectors=False)[0])
+        lam = float(spla.eigsh(K, k=1, M=M, which="LA", tol=1e-10, return_eigenvectors=False,
+                               v0=_start_vector(K.shape[0]))[0])
     return math.sqrt(max(lam, 0.0))
 
 

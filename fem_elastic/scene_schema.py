@@ -641,8 +641,8 @@ def integrator_options(name: str) -> dict[str, tuple[Type, Any]]:
     --------
     >>> sorted(integrator_options("linearized_implicit_euler"))
     ['linear_solver', 'mass', 'project', 'warping']
-    >>> integrator_options("rk4")
-    {}
+    >>> sorted(integrator_options("rk4"))
+    ['max_substeps', 'recheck_every', 'safety', 'substep']
     """
     out = {}
     for p in _constructor_parameters(INTEGRATORS[name]):

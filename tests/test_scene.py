@@ -96,7 +96,7 @@ ERRORS = [
     # integrator options checked against the constructor's signature
     ('type = "implicit_euler"', 'type = "implicit_euler"\nrtoll = 1e-6', "integrator.rtoll", "rtoll",
      ['unknown option "rtoll"', '"rtol"'], "rtol"),
-    ('type = "implicit_euler"', 'type = "rk4"\nrtol = 1e-6', "integrator.rtol", "rtol", ["rk4 takes no options"],
+    ('type = "implicit_euler"', 'type = "rk4"\nrtol = 1e-6', "integrator.rtol", "rtol", ['unknown option "rtol" for integrator "rk4"', "Its options: substep"],
      None),
     ('type = "implicit_euler"', 'type = "implicit_euler"\nrtol = 2.0', "integrator.rtol", "rtol = 2.0",
      ["rtol must be in (0, 1)"], None),

@@ -78,7 +78,9 @@ class StepStats:
     newton_iterations, line_search_cuts, linear_iterations : int
         Solver work of implicit schemes (0 for explicit ones).
     dt_cuts : int
-        Times the step was halved because Newton did not converge.
+        Times the step was retried smaller: halved because Newton did not
+        converge (implicit schemes), or with more sub-steps (explicit
+        sub-stepping).
     substeps : int
         Sub-steps the step was finally taken in (1 without cuts).
     cuts : list of (float, float, str)

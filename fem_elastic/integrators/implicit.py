@@ -85,10 +85,10 @@ class _Implicit(Integrator):
         out, why = self._try(model, state, h, stats)
         if out is not None:
             return out, why
+        stats.cuts.append((float(state.t), float(h), why))  # every failed attempt, the last one too
         if depth >= self.max_dt_cuts:
             return None, why
         stats.dt_cuts += 1
-        stats.cuts.append((float(state.t), float(h), why))
         log.info("%s: step at t=%.6g s with dt=%.3g s failed (%s); halving", self.name, state.t, h, why)
         mid, why = self._cut_step(model, state, h / 2, depth + 1, stats)
         if mid is None:
