@@ -32,6 +32,8 @@ from .errors import InvalidMesh, InvalidParameter
 
 __all__ = [
     "DEGENERATE_TOL",
+    "RESOLUTION",
+    "SIZE_RANGE",
     "beam_mesh",
     "mesh_from_arrays",
     "validate_mesh",
@@ -49,6 +51,20 @@ logger = logging.getLogger(__name__)
 #: any usable element (whose stiffness would be ~1e10 times the mean) and far
 #: above round-off of a truly flat element (~1e-16 relative).
 DEGENERATE_TOL = 1e-10
+
+#: Sizes (m) a mesh may span: from a nanostructure to far beyond a galaxy. Outside
+#: this range the quantities assembly computes (volumes ~ L^3, facet normals squared
+#: ~ L^4, forces ~ rho g L^3 and their squared norms ~ L^6, with material constants up
+#: to ~1e12) leave the float64 range (1e-308 to 1e308), and a mesh that size is
+#: almost surely in the wrong units.
+SIZE_RANGE = (1e-30, 1e30)
+
+#: Coarsest relative resolution of an edge by its coordinates that is accepted: a
+#: vertex at distance d from the origin is known to ~eps d, so an edge of length h
+#: is resolved to ~eps d / h of itself, and F = I + grad u and every strain carry
+#: that error at rest. 1e-6 (a mm element 4500 km from the origin) leaves strains
+#: of 1e-4 accurate to 1 %.
+RESOLUTION = 1e-6
 
 _MAX_LISTED = 10
 
@@ -72,8 +88,20 @@ def _signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
 
 def _check_arrays(points, tets) -> tuple[np.ndarray, np.ndarray]:
     """Check shapes, finiteness and index range of raw arrays; return copies."""
-    points = np.asarray(points)
-    tets = np.asarray(tets)
+    try:
+        points = np.asarray(points)
+        tets = np.asarray(tets)
+    except ValueError:  # ragged nested lists
+        raise InvalidMesh(
+            "points and tets must be rectangular arrays, (n_vertices, 3) coordinates in m "
+            "and (n_elements, 4) vertex indices; some rows have a different length. Check "
+            "how they were read."
+        ) from None
+    if points.dtype.kind not in "iuf":
+        raise InvalidMesh(
+            f"points must be real coordinates in m, got dtype {points.dtype}. Convert them, "
+            "e.g. np.asarray(points, dtype=float), if they were read as text."
+        )
     if points.ndim != 2 or points.shape[1] != 3:
         raise InvalidMesh(
             f"points must have shape (n_vertices, 3) (3-D coordinates in m), got "
@@ -86,9 +114,15 @@ def _check_arrays(points, tets) -> tuple[np.ndarray, np.ndarray]:
             "For quadratic tets (10 nodes) keep the first 4 columns (the corners)."
         )
     if tets.shape[0] == 0:
-        raise InvalidMesh("The mesh has no tetrahedra; a volume tet mesh is needed.")
+        raise InvalidMesh(
+            "The mesh has no tetrahedra (tets has 0 rows); a volume tet mesh is needed: "
+            "mesh the solid's volume (e.g. gmsh -3 or TetGen), not only its surface."
+        )
     if not np.issubdtype(tets.dtype, np.integer):
-        raise InvalidMesh(f"tets must hold integer vertex indices, got dtype {tets.dtype}.")
+        raise InvalidMesh(
+            f"tets must hold integer vertex indices, got dtype {tets.dtype}. Convert them, "
+            "e.g. np.asarray(tets).astype(np.int64), after checking they are whole numbers."
+        )
     points = np.array(points, dtype=np.float64)
     bad_vertices = np.nonzero(~np.all(np.isfinite(points), axis=1))[0]
     if bad_vertices.size:
@@ -103,10 +137,83 @@ def _check_arrays(points, tets) -> tuple[np.ndarray, np.ndarray]:
         raise InvalidMesh(
             f"{bad_elements.size} tets refer to vertex indices outside [0, "
             f"{points.shape[0] - 1}]: elements {_listed(bad_elements)}. The connectivity "
-            "does not match the point array (0-based indices are expected).",
+            "does not match the point array: 0-based indices are expected (subtract 1 from "
+            "1-based ones), and every index needs a row of points.",
             elements=bad_elements,
         )
     return points, np.array(tets, dtype=np.int64)
+
+
+def _check_scale(points: np.ndarray, tets: np.ndarray) -> None:
+    """Raise InvalidMesh when float64 cannot represent the mesh's computations.
+
+    Two ways: the mesh spans less than ``SIZE_RANGE[0]`` or more than
+    ``SIZE_RANGE[1]`` m (wrong units; volumes, forces and their squares over- or
+    underflow), or it lies so far from the origin that its coordinates resolve an
+    edge only to worse than ``RESOLUTION`` of its length (spurious strains at rest;
+    beyond ~1e15 times the edge every tet comes out flat).
+    """
+    lo, hi = SIZE_RANGE
+    with np.errstate(over="ignore", invalid="ignore"):
+        extent = float(np.max(points.max(axis=0) - points.min(axis=0)))
+    far = float(np.abs(points).max())
+    if extent == 0.0:
+        raise InvalidMesh(
+            "All vertices of the mesh coincide (it spans 0 m), so every tet is flat. The "
+            "point array is probably wrong (a column of zeros, or points written in the "
+            "wrong place): check it against the mesh file."
+        )
+    if not lo <= extent <= hi or far > hi:
+        size = f"spans {extent:.3g} m" if not lo <= extent <= hi else f"reaches {far:.3g} m from the origin"
+        raise InvalidMesh(
+            f"The mesh {size}, outside the [{lo:g}, {hi:g}] m fem_elastic computes with: "
+            "volumes, forces and their squares would leave the float64 range. The units are "
+            "probably wrong (fem_elastic uses m): scale the mesh, e.g. mesh.scaled(1e-3) "
+            "for coordinates in mm."
+        )
+    a = tets[:, [1, 2, 3, 2, 3, 3]]
+    b = tets[:, [0, 0, 0, 1, 1, 2]]
+    edges = points[a] - points[b]
+    h = float(np.median(np.sqrt(np.einsum("eki,eki->ek", edges, edges))))
+    eps = np.finfo(float).eps
+    if h > 0.0 and eps * far > RESOLUTION * h:
+        raise InvalidMesh(
+            f"The mesh lies {far:.3g} m from the origin, {far / h:.2g} times its typical edge "
+            f"({h:.3g} m): float64 coordinates there resolve an edge only to "
+            f"{eps * far / h:.0e} of its length (at most {RESOLUTION:g} is accepted), and the "
+            "strains computed from them carry that error. Translate the mesh near the origin, "
+            "e.g. mesh.translated(-mesh.p.mean(axis=1))."
+        )
+
+
+def _check_connectivity(tets: np.ndarray) -> None:
+    """Raise InvalidMesh for a tet that repeats a vertex, then for duplicate tets."""
+    key = np.sort(tets, axis=1)
+    repeated = np.nonzero((key[:, 1:] == key[:, :-1]).any(axis=1))[0]
+    if repeated.size:
+        e = int(repeated[0])
+        raise InvalidMesh(
+            f"{repeated.size} tets use a vertex twice (e.g. element {e} = "
+            f"{tets[e].tolist()}): elements {_listed(repeated)}. A tet needs four distinct "
+            "vertices; the connectivity is corrupt there (check how it was written or "
+            "converted), or drop those elements.",
+            elements=repeated,
+        )
+    # sort the rows by (v0 n + v1, v2 n + v3): equal neighbours are the same tet
+    n = int(key.max()) + 1
+    k1, k2 = key[:, 0] * n + key[:, 1], key[:, 2] * n + key[:, 3]
+    order = np.lexsort((k2, k1))
+    same = (k1[order][1:] == k1[order][:-1]) & (k2[order][1:] == k2[order][:-1])
+    if same.any():
+        dup = np.sort(order[1:][same])
+        first = int(order[:-1][same][0])
+        raise InvalidMesh(
+            f"{dup.size} tets repeat another tet's four vertices (e.g. element {int(order[1:][same][0])} "
+            f"and element {first}): elements {_listed(dup)}. Overlapping copies double the "
+            "mass and stiffness there; drop them, e.g. keep the rows "
+            "np.unique(np.sort(tets, axis=1), axis=0, return_index=True)[1].",
+            elements=dup,
+        )
 
 
 def _check_volumes(volumes: np.ndarray, tol: float) -> None:
@@ -133,7 +240,7 @@ def _check_volumes(volumes: np.ndarray, tol: float) -> None:
 
 
 def _check_unused(n_vertices: int, tets: np.ndarray) -> None:
-    unused = np.setdiff1d(np.arange(n_vertices), tets)
+    unused = np.flatnonzero(np.bincount(tets.ravel(), minlength=n_vertices) == 0)
     if unused.size:
         raise InvalidMesh(
             f"{unused.size} vertices are not used by any tet: vertices {_listed(unused)}. "
@@ -169,11 +276,23 @@ def _attach_boundaries(mesh: MeshTet, triples: Mapping, missing: str = "raise") 
         return mesh
     boundaries = {}
     for name, tri in triples.items():
-        tri = np.asarray(tri)
+        try:
+            tri = np.asarray(tri)
+        except ValueError:  # ragged nested lists
+            raise InvalidMesh(
+                f"Boundary {name!r} must be an (n_facets, 3) array of vertex indices; its "
+                "rows have different lengths. Give three vertex indices per triangle."
+            ) from None
         if tri.size and (tri.ndim != 2 or tri.shape[1] != 3):
             raise InvalidMesh(
                 f"Boundary {name!r} must be an (n_facets, 3) array of vertex indices, "
-                f"got shape {tri.shape}."
+                f"got shape {tri.shape}. Give three vertex indices per triangle."
+            )
+        if tri.size and not np.issubdtype(tri.dtype, np.integer):
+            raise InvalidMesh(
+                f"Boundary {name!r} must hold integer vertex indices, got dtype {tri.dtype}. "
+                "Convert it, e.g. np.asarray(triangles).astype(np.int64), after checking "
+                "the values are whole vertex numbers."
             )
         idx = _facet_indices(mesh, tri)
         bad = np.nonzero(idx < 0)[0]
@@ -183,7 +302,9 @@ def _attach_boundaries(mesh: MeshTet, triples: Mapping, missing: str = "raise") 
                 f"{_listed(bad)}."
             )
             if missing == "raise":
-                raise InvalidMesh(msg + " Boundary triangles must be tet faces.", elements=bad)
+                raise InvalidMesh(
+                    msg + " Boundary triangles must be faces of the tets: check that they use "
+                    "the same 0-based vertex numbers as tets.", elements=bad)
             logger.warning("%s They are dropped.", msg)
         boundaries[str(name)] = np.unique(idx[idx >= 0]).astype(np.int32)
     return mesh.with_boundaries(boundaries)
@@ -262,9 +383,11 @@ def validate_mesh(mesh, *, degenerate_tol: float = DEGENERATE_TOL):
     """Check that ``mesh`` is a usable linear tet mesh; return it unchanged.
 
     Checks, in order: it is a linear :class:`skfem.MeshTet`; points are finite
-    and 3-D; element indices are in range; no tet is degenerate
-    (``|V| <= degenerate_tol * mean |V|``); none is inverted (``V < 0``); every
-    vertex is used by some tet.
+    and 3-D; element indices are in range; no tet uses a vertex twice and no two
+    tets have the same four vertices; the mesh spans ``SIZE_RANGE`` (1e-30 to 1e30
+    m) and lies near enough the origin that its coordinates resolve its edges to
+    ``RESOLUTION`` (1e-6); no tet is degenerate (``|V| <= degenerate_tol * mean
+    |V|``); none is inverted (``V < 0``); every vertex is used by some tet.
 
     Parameters
     ----------
@@ -316,6 +439,8 @@ def validate_mesh(mesh, *, degenerate_tol: float = DEGENERATE_TOL):
             "the same grid, a surface can be meshed with gmsh -3 or TetGen."
         )
     points, tets = _check_arrays(np.asarray(mesh.p).T, np.asarray(mesh.t).T)
+    _check_connectivity(tets)
+    _check_scale(points, tets)
     _check_volumes(_signed_volumes(points, tets), degenerate_tol)
     _check_unused(points.shape[0], tets)
     return mesh
@@ -372,6 +497,11 @@ def mesh_from_arrays(
 
 def _from_arrays(points, tets, boundaries, *, reorient, validate, missing="raise") -> MeshTet:
     """:func:`mesh_from_arrays`, choosing what to do with stray boundary triangles."""
+    if boundaries is not None and not isinstance(boundaries, Mapping):
+        raise InvalidMesh(
+            "boundaries must be a dict {name: (n_facets, 3) vertex indices}, e.g. "
+            f"{{'left': [[0, 2, 1]]}}; got a {type(boundaries).__name__}."
+        )
     p, t = _check_arrays(points, tets)
     if reorient:
         t = _reoriented(p, t)
