@@ -64,6 +64,9 @@ def test_when_the_cuts_run_out_the_step_diverges_with_its_reason(sagging, max_dt
     # the cuts made before giving up: the full step (when one was allowed)
     assert ie.last_stats.dt_cuts == max_dt_cuts
     assert [c[:2] for c in ie.last_stats.cuts[:max_dt_cuts]] == [(0.0, DT)][:max_dt_cuts]
+    # ... and the attempt that gave up, at the smallest step allowed
+    assert ie.last_stats.cuts[-1][1] == DT / 2 ** max_dt_cuts
+    assert ie.last_stats.cuts[-1][2] == err.reason
 
 
 def test_simulate_reports_the_cuts_of_an_implicit_run(sagging):
@@ -104,3 +107,4 @@ def test_a_run_that_runs_out_of_cuts_carries_them_in_its_error(sagging):
     err = info.value
     assert err.step == 0 and err.reason.startswith("Newton did not converge")
     assert [(c["step"], c["t"], c["dt"]) for c in err.trajectory.cuts][:1] == [(0, 0.0, DT)]
+    assert err.trajectory.cuts[-1]["dt"] == DT / 2 and err.trajectory.cuts[-1]["step"] == 0
