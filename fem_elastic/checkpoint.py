@@ -21,7 +21,8 @@ A checkpoint directory holds
 - ``steps.f64``: the per-step solver statistics, appended (one record per step, the
   fields of ``Trajectory.step_stats`` in the order of ``trajectory.STEP_FIELDS``;
   counts are stored as float64, exact below 2^53);
-- ``cuts.jsonl``: every failed attempt of a step (step, t, dt, reason), appended.
+- ``cuts.jsonl``: every failed attempt of a step (step, t, dt, reason), appended, one
+  JSON object per line.
 
 The appended files are fsynced before ``checkpoint.npz`` is replaced, and
 only the first records it counts are read back: a crash mid-write leaves a
@@ -51,6 +52,7 @@ import json
 import logging
 import math
 import os
+import types
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -82,19 +84,33 @@ def _sha(*arrays) -> str:
     return h.hexdigest()[:20]
 
 
+def _describe(value, depth: int = 0):
+    """A plain, exact description of a setting: numbers (floats in hex), strings, arrays by hash,
+    and objects by their class and public attributes (recursively, a few levels deep)."""
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
+    if isinstance(value, float):
+        return value.hex()
+    if isinstance(value, np.ndarray):
+        return "array:" + _sha(value)
+    if isinstance(value, (list, tuple)):
+        return [_describe(v, depth + 1) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _describe(v, depth + 1) for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}
+    if isinstance(value, (types.FunctionType, types.BuiltinFunctionType, types.MethodType, type)):
+        # by name, never by repr: a repr holds the address, which differs from process to process
+        return f"{getattr(value, '__module__', '')}.{getattr(value, '__qualname__', type(value).__name__)}"
+    fields = getattr(value, "__dict__", None)
+    if fields is None or depth > 3:
+        return type(value).__name__
+    return {"class": type(value).__name__,
+            **{k: _describe(v, depth + 1) for k, v in sorted(fields.items()) if not k.startswith("_")}}
+
+
 def _settings(integrator) -> dict:
-    """The integrator's plain settings (numbers, strings, bools), for the fingerprint."""
-    out = {}
-    for k, v in sorted(vars(integrator).items()):
-        if k.startswith("_") or k == "last_stats":
-            continue
-        if isinstance(v, (bool, int, str)) or v is None:
-            out[k] = v
-        elif isinstance(v, float):
-            out[k] = v.hex()
-        else:
-            out[k] = type(v).__name__
-    return out
+    """The integrator's settings (its public attributes, the linear solver's included)."""
+    return {k: _describe(v) for k, v in sorted(vars(integrator).items())
+            if not k.startswith("_") and k != "last_stats"}
 
 
 def run_fingerprint(model, integrator, h, n_steps, record_every, state0, energy_growth) -> dict:
@@ -123,12 +139,13 @@ def run_fingerprint(model, integrator, h, n_steps, record_every, state0, energy_
     dofs, xc, vc = model.constraints(state0.t)
     return {
         "ndofs": int(model.ndofs),
-        "body": repr(model.body),
+        "body": _describe(model.body),
         "density": float(model.density).hex(),
         "terms": [type(p).__name__ for p in model.potentials],
-        "damping": repr(model.damping),
-        "obstacles": [repr(o) for o in model.obstacles],
-        "driven": len(model.driven),
+        "damping": _describe(model.damping),
+        "obstacles": [_describe(o) for o in model.obstacles],
+        "driven": [_describe(motion) for motion, _, _ in model.driven],
+        "driven_dofs": _sha(*[np.asarray(dofs) for _, _, dofs in model.driven]),
         "model_arrays": _sha(model.X, model.lumped_mass, np.asarray(dofs), model.external_force()),
         "integrator": getattr(integrator, "name", type(integrator).__name__),
         "integrator_settings": _settings(integrator),
@@ -275,7 +292,7 @@ def load_checkpoint(directory) -> Checkpoint:
     for i, name in enumerate(STEP_FIELDS):
         col = steps[:, i]
         stats[name] = col.astype(np.int64) if name in COUNT_FIELDS else col.copy()
-    cuts = _read_cuts(d / CUTS_NAME, meta["n_cuts"])
+    cuts = _read_cuts(d / CUTS_NAME, meta["n_cuts"], meta["cuts_bytes"])
     return Checkpoint(
         directory=d, step=step, n_steps=meta["n_steps"], state=State(x, v, t),
         integrator_state=integ, fingerprint=meta["fingerprint"], e_ref=e_ref, scale=scale,
@@ -300,12 +317,25 @@ def _read_records(path: Path, n: int, size: int) -> np.ndarray:
     return data.reshape(n, size)
 
 
-def _read_cuts(path: Path, n: int) -> list:
+def _read_cuts(path: Path, n: int, n_bytes: int) -> list:
     if n == 0:
         return []
-    with open(path, encoding="utf-8") as fh:
-        lines = [next(fh) for _ in range(n)]
-    return [json.loads(line) for line in lines]
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(n_bytes)
+        lines = data.decode("utf-8").splitlines()
+        cuts = [json.loads(line) for line in lines]
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise InvalidParameter(
+            f"the checkpoint's {path.name} cannot be read ({type(exc).__name__}: {exc}): the "
+            "directory is damaged; remove it to start afresh."
+        ) from None
+    if len(data) != n_bytes or len(cuts) != n:
+        raise InvalidParameter(
+            f"{path} holds {len(cuts)} failed attempts, the checkpoint counts {n}: the directory is "
+            "damaged; remove it to start afresh."
+        )
+    return cuts
 
 
 class Checkpointer:
@@ -335,10 +365,13 @@ class Checkpointer:
         if resume is None:
             for name in (CHECKPOINT_NAME, FRAMES_NAME, STEPS_NAME, CUTS_NAME):
                 (self.directory / name).unlink(missing_ok=True)
-            self.n_frames = self.n_steps = self.n_cuts = 0
+            self.n_frames = self.n_steps = self.n_cuts = self.cuts_bytes = 0
         else:
             self.n_frames, self.n_steps, self.n_cuts = len(resume.frames), resume.step, len(resume.cuts)
+            self.cuts_bytes = len(_cut_lines(resume.cuts))
         self.last_step = self.n_steps
+        for tmp in self.directory.glob(f".{CHECKPOINT_NAME}.*.tmp"):  # what a kill mid-write left
+            tmp.unlink(missing_ok=True)
 
     def due(self, steps_done: int) -> bool:
         """True when a periodic checkpoint is due after ``steps_done`` steps."""
@@ -365,10 +398,13 @@ class Checkpointer:
         rows = np.column_stack([np.asarray(stats[name][self.n_steps:k], dtype=float)
                                 for name in STEP_FIELDS]) if k > self.n_steps else []
         self._append(d / STEPS_NAME, self.n_steps, len(STEP_FIELDS), rows)
-        self._append_cuts(d / CUTS_NAME, cuts[self.n_cuts:nc])
+        new_cuts = _cut_lines(cuts[self.n_cuts:nc])
+        self._append_bytes(d / CUTS_NAME, self.cuts_bytes, new_cuts)
+        cuts_bytes = self.cuts_bytes + len(new_cuts)
         meta = {
             "format": FORMAT, "step": k, "n_steps": self.fingerprint["n_steps"], "n_frames": nf,
-            "n_cuts": nc, "frame_size": self.frame_size, "driving": bool(snapshot.driving),
+            "n_cuts": nc, "cuts_bytes": cuts_bytes, "frame_size": self.frame_size,
+            "driving": bool(snapshot.driving),
             "fingerprint": self.fingerprint,
         }
         s = snapshot.state
@@ -387,32 +423,33 @@ class Checkpointer:
 
         path = _atomic_write(d / CHECKPOINT_NAME, write)
         self.n_frames, self.n_steps, self.n_cuts, self.last_step = nf, k, nc, k
+        self.cuts_bytes = cuts_bytes
         log.debug("checkpoint after %d steps (t = %.6g s) in %s", k, s.t, d)
         return path
 
     @staticmethod
     def _append(path: Path, n_done: int, size: int, records) -> None:
-        """Cut ``path`` to its first ``n_done`` records, append ``records`` and fsync."""
+        """Cut ``path`` to its first ``n_done`` records of ``size`` floats, append ``records``, fsync."""
+        data = b"".join(np.asarray(r, dtype="<f8").tobytes() for r in records)
+        Checkpointer._append_bytes(path, n_done * size * 8, data)
+
+    @staticmethod
+    def _append_bytes(path: Path, n_keep: int, data: bytes) -> None:
+        """Cut ``path`` to ``n_keep`` bytes (a tail a crash left), append ``data`` and fsync.
+
+        The bytes a committed checkpoint counts are never rewritten, so a crash
+        here leaves that checkpoint readable.
+        """
         with open(path, "ab") as fh:
-            fh.truncate(n_done * size * 8)  # drop a tail a crash left behind
-            for r in records:
-                np.asarray(r, dtype="<f8").tofile(fh)
+            fh.truncate(n_keep)
+            fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
 
-    def _append_cuts(self, path: Path, cuts) -> None:
-        lines = []
-        if path.exists():
-            with open(path, encoding="utf-8") as fh:
-                lines = [line for _, line in zip(range(self.n_cuts), fh)]
-        if len(lines) == self.n_cuts and not cuts and path.exists():
-            return
-        lines += [json.dumps(c) + "\n" for c in cuts]
-        with open(path, "w", encoding="utf-8") as fh:
-            fh.writelines(lines)
-            fh.flush()
-            os.fsync(fh.fileno())
-        _fsync_directory(path.parent)
+
+def _cut_lines(cuts) -> bytes:
+    """``cuts.jsonl`` records: one JSON object per line, UTF-8."""
+    return "".join(json.dumps(c) + "\n" for c in cuts).encode("utf-8")
 
 
 @dataclass

@@ -121,6 +121,17 @@ def write_summary(path, summary: dict) -> Path:
     return write_text_atomic(path, text + "\n")
 
 
+def remove_temporary_files(run_dir) -> None:
+    """Remove what atomic writes cut short by a kill left in a run directory.
+
+    :func:`fem_elastic.io` writes each file to ``.NAME.XXXX.tmp`` beside it and
+    renames it; only a process killed outright (no handler runs) leaves one.
+    """
+    run_dir = Path(run_dir)
+    for tmp in [*run_dir.glob(".*.tmp"), *(run_dir / FRAMES_DIR).glob(".frame_*.tmp")]:
+        tmp.unlink(missing_ok=True)
+
+
 def _field_range(values: np.ndarray) -> tuple[float | None, float | None]:
     """(min, max) over the finite values (NaN marks inverted tets); None if there are none."""
     finite = values[np.isfinite(values)]
@@ -241,6 +252,7 @@ class SeriesWriter:
         self.finished = False
         self.run_dir.mkdir(parents=True, exist_ok=True)
         (self.run_dir / FRAMES_DIR).mkdir(exist_ok=True)
+        remove_temporary_files(self.run_dir)
         if resume_from is None:
             self._clear_stale()
         else:

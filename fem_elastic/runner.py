@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import logging
+import shlex
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -122,14 +123,23 @@ def run_variant(run, out_dir, *, progress: bool = False, checkpoint_every: int |
         On Ctrl-C, after the frames so far, a checkpoint and ``summary.json`` are written.
     """
     from .checkpoint import CHECKPOINT_NAME, load_checkpoint
-    from .output import SeriesWriter
+    from .output import SUMMARY_NAME, SeriesWriter, remove_temporary_files
     from .simulate import simulate
 
     run_dir = Path(out_dir) / run.name
     ck_dir = run_dir / CHECKPOINT_DIR
     every = run.output.get("checkpoint_every", 0) if checkpoint_every is None else checkpoint_every
     start = load_checkpoint(ck_dir) if resume and (ck_dir / CHECKPOINT_NAME).is_file() else None
-    writer = SeriesWriter(run.model, run_dir, every=run.record_every, info=run.info, resume_from=start)
+    if start is not None and start.complete and _finished(run_dir / SUMMARY_NAME):
+        # finished and written: nothing to redo (its files may have been pruned, [output] vtu = false)
+        remove_temporary_files(run_dir)
+        traj = simulate(run.model, run.integrator, run.dt, steps=run.steps, state=run.state,
+                        record_every=run.record_every, checkpoint_dir=ck_dir, checkpoint_every=every,
+                        resume=True)  # checks the checkpoint is this run's, returns its trajectory
+        return RunOutcome(run.name, run_dir, "completed", traj.message, traj, 0.0, 0.0, run)
+    # n_steps: the callback writes the last frame, before simulate's final checkpoint
+    writer = SeriesWriter(run.model, run_dir, every=run.record_every, n_steps=run.steps, info=run.info,
+                          resume_from=start)
     t0 = time.perf_counter()
     if start is None:
         writer.write_state(run.state)
@@ -148,8 +158,8 @@ def run_variant(run, out_dir, *, progress: bool = False, checkpoint_every: int |
     except KeyboardInterrupt:
         elapsed = time.perf_counter() - t0
         msg = (f"interrupted after {writer.steps_taken} of {run.steps} steps; the frames written so far in "
-               f"{run_dir} are complete and readable, and `fem-elastic run --resume {Path(out_dir)}` "
-               "continues from the checkpoint")
+               f"{run_dir} are complete and readable, and `{_resume_command(out_dir)}` continues "
+               "from the checkpoint")
         writer.finish(None, status="interrupted", message=msg)
         raise SceneInterrupted(
             RunOutcome(run.name, run_dir, "interrupted", msg, None, elapsed, writer.seconds_output, run)
@@ -157,6 +167,19 @@ def run_variant(run, out_dir, *, progress: bool = False, checkpoint_every: int |
     elapsed = time.perf_counter() - t0
     writer.finish(traj, status="completed", message=traj.message)
     return RunOutcome(run.name, run_dir, "completed", traj.message, traj, elapsed, writer.seconds_output, run)
+
+
+def _finished(summary_path: Path) -> bool:
+    """True when a run's ``summary.json`` says it completed."""
+    try:
+        return json.loads(summary_path.read_text(encoding="utf-8")).get("status") == "completed"
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def _resume_command(out_dir) -> str:
+    """The command that resumes ``out_dir``, quoted for a POSIX shell."""
+    return f"fem-elastic run --resume {shlex.quote(str(out_dir))}"
 
 
 def render_outputs(out_dir, run_dirs, output: dict, *, progress: bool = False) -> list[Path]:
@@ -224,6 +247,7 @@ def run_scene(scene, out_dir, *, variants=None, progress: bool = False, render: 
         raise InvalidParameter(f"--out {out_dir} is a file; give a directory for the run's output.")
     runs = scene.build(variants)  # before touching the directory: a bad scene leaves it as it was
     out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "summary.json").unlink(missing_ok=True)  # an earlier run's: stale from now on
     if not resume:
         _record_run(out_dir, scene, variants, render, checkpoint_every)
     outcomes = []
@@ -233,6 +257,11 @@ def run_scene(scene, out_dir, *, variants=None, progress: bool = False, render: 
                                         checkpoint_every=checkpoint_every, resume=resume))
         except SceneInterrupted as stop:
             raise SceneInterrupted(stop.outcome, outcomes + [stop.outcome]) from None
+        except KeyboardInterrupt:  # outside the time loop: setting up or finishing the series
+            stop = RunOutcome(run.name, out_dir / run.name, "interrupted", (
+                f"interrupted while writing its series; `{_resume_command(out_dir)}` continues from "
+                "the checkpoints"), None, 0.0, 0.0, run)
+            raise SceneInterrupted(stop, outcomes + [stop]) from None
     rendered = []
     if render and runs:
         try:

@@ -1,8 +1,8 @@
 """Second reader's checks of checkpoints and resume (issue 7, part 1).
 
 Each test states a case where the claim "a resumed run repeats the uninterrupted
-one bit for bit, and a different run is refused" should hold. The ones marked
-xfail(strict=True) show a bug found in review; they pass once it is fixed.
+one bit for bit, and a different run is refused" should hold. Most began as
+strict xfails showing a bug found in review, and pass since it was fixed.
 """
 
 from __future__ import annotations
@@ -38,10 +38,6 @@ def _kicked_down(model):
         [0 * X[:, 0], 0 * X[:, 0], -20.0 * X[:, 0]]))
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "checkpoint.Checkpointer._append_cuts rewrites cuts.jsonl in place (open 'w' truncates "
-    "first): a crash between the truncation and the write leaves the file shorter than the "
-    "previous checkpoint.npz counts, and load_checkpoint then raises a bare StopIteration"))
 def test_a_crash_while_rewriting_cuts_keeps_the_previous_checkpoint(tmp_path, monkeypatch):
     model = _beam(gravity=(0, 0, -9.81))
     kick = _kicked_down(model)
@@ -75,9 +71,6 @@ def test_a_crash_while_rewriting_cuts_keeps_the_previous_checkpoint(tmp_path, mo
     assert_same_run(full, resumed)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "checkpoint._read_cuts lets StopIteration / FileNotFoundError escape where _read_records "
-    "raises InvalidParameter ('the directory is damaged')"))
 def test_a_lost_cuts_file_is_a_typed_error(tmp_path):
     model = _beam(gravity=(0, 0, -9.81))
     d = tmp_path / "ck"
@@ -90,9 +83,6 @@ def test_a_lost_cuts_file_is_a_typed_error(tmp_path):
         fe.load_checkpoint(d)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the fingerprint keeps only the number of driven boundaries (checkpoint.run_fingerprint, "
-    "'driven': len(model.driven)): a Twist with another release time resumes silently"))
 def test_resuming_with_another_driven_release_is_refused(tmp_path):
     def model(release):
         return fe.Model(fe.beam_mesh(cells=(4, 1, 1)), density=1000.0,
@@ -106,9 +96,6 @@ def test_resuming_with_another_driven_release_is_refused(tmp_path):
         fe.simulate(model(0.5), fe.Newmark(), 0.02, steps=10, checkpoint_dir=d, resume=True)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "checkpoint._settings reduces a linear solver to its class name: AMGSolver(rtol=1e-3) "
-    "resumes a run made with AMGSolver(rtol=1e-8)"))
 def test_resuming_with_another_linear_solver_tolerance_is_refused(tmp_path):
     model = _beam(gravity=(0, 0, -9.81))
     d = tmp_path / "ck"
@@ -146,10 +133,6 @@ def _tiny(tmp_path, extra=""):
     return fe.load_scene(path)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "runner.run_variant makes its SeriesWriter without n_steps, so the last frame is written by "
-    "finish() after simulate's final (complete) checkpoint: a stop in between resumes with that "
-    "frame 'missing' (a warning) and numbers the last frame frame_000005 instead of frame_000004"))
 def test_a_stop_between_the_final_checkpoint_and_the_last_frame(tmp_path, monkeypatch, caplog):
     scene = _tiny(tmp_path)
     run_scene(scene, tmp_path / "a", variants=["fem"], render=False)
@@ -198,10 +181,6 @@ def test_ctrl_c_in_every_callback_of_a_scene_resumes_to_the_same_series(tmp_path
         assert got.summary["frames"] == ref.summary["frames"] and got.summary["status"] == "completed"
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "[output] vtu = false removes the series of a finished run; resuming it again "
-    "(output.SeriesWriter._keep) warns that every frame is missing, writes the last state as a "
-    "new frame and rewrites summary.json with frames = 1 instead of the run's count"))
 def test_resuming_a_finished_run_without_vtu_keeps_its_summary(tmp_path, caplog):
     scene = _tiny(tmp_path, "\nvtu = false")
     out = tmp_path / "o"
@@ -214,9 +193,6 @@ def test_resuming_a_finished_run_without_vtu_keeps_its_summary(tmp_path, caplog)
     assert after["frames"] == before["frames"]
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "runner.run_variant's interrupt message prints `fem-elastic run --resume DIR` with DIR "
-    "unquoted: a directory with a space cannot be pasted back into a shell (use shlex.quote)"))
 def test_the_resume_hint_quotes_a_path_with_spaces(tmp_path, monkeypatch, capsys):
     path = tmp_path / "scene.toml"
     path.write_text(TINY.replace('render = ["gif", "png"]', "render = []"))
@@ -233,10 +209,6 @@ def test_the_resume_hint_quotes_a_path_with_spaces(tmp_path, monkeypatch, capsys
     assert f"fem-elastic run --resume {shlex.quote(str(out))}" in capsys.readouterr().err
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a Ctrl-C outside run_variant's try (SeriesWriter construction, finish of a completed "
-    "variant) escapes as a bare KeyboardInterrupt: cli prints 'interrupted' without the resume "
-    "hint and OUT/summary.json of the previous run still says 'completed'"))
 def test_an_interrupted_rerun_leaves_no_stale_completed_summary(tmp_path, monkeypatch, capsys):
     path = tmp_path / "scene.toml"
     path.write_text(TINY.replace('render = ["gif", "png"]', "render = []"))
@@ -256,9 +228,6 @@ def test_an_interrupted_rerun_leaves_no_stale_completed_summary(tmp_path, monkey
     assert not top.exists() or json.loads(top.read_text())["status"] != "completed"
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a kill -9 inside io._atomic_write leaves its '.NAME.XXXX.tmp' (a whole checkpoint.npz or "
-    "VTU frame); neither a resume nor a fresh run in that directory removes them"))
 def test_a_resume_sweeps_the_temporary_files_a_kill_left(tmp_path):
     scene = _tiny(tmp_path, "\ncheckpoint_every = 4")
     out = tmp_path / "o"

@@ -162,16 +162,51 @@ def test_checkpoint_every_from_the_command_line(tmp_path):
     assert ck.complete and ck.step == 20
 
 
-def test_resume_after_frames_were_removed_keeps_the_rest(tmp_path, caplog):
+def test_resume_after_frames_were_removed_keeps_the_rest(tmp_path, monkeypatch, caplog):
     """A frame deleted by hand is left out of the series, with one warning, and numbering goes on."""
     scene = _scene(tmp_path)
     out = tmp_path / "o"
-    assert cli.main(["run", str(scene), "--out", str(out), "-q", "--variant", "fem"]) == 0
+    real = SeriesWriter.callback
+
+    def stop_at_step_12(self, k, state):
+        if k == 12:
+            raise KeyboardInterrupt
+        real(self, k, state)
+
+    monkeypatch.setattr(SeriesWriter, "callback", stop_at_step_12)
+    assert cli.main(["run", str(scene), "--out", str(out), "-q", "--variant", "fem"]) == 130
+    monkeypatch.setattr(SeriesWriter, "callback", real)
     (out / "fem" / "frames" / "frame_000003.vtu").unlink()
     (out / "fem" / "frames" / "frame_000004.vtu").unlink()
     with caplog.at_level("WARNING"):
         assert cli.main(["run", "--resume", str(out), "-q"]) == 0
     warned = [r for r in caplog.records if "frames are missing" in r.getMessage()]
-    assert len(warned) == 1 and "2 of the checkpoint's 11 frames" in warned[0].getMessage()
+    assert len(warned) == 1 and "2 of the checkpoint's 7 frames" in warned[0].getMessage()
     series = read_series(out / "fem")
     assert series.times.size == 9 and series.files[-1].name == "frame_000010.vtu"
+
+
+def test_resuming_a_finished_run_leaves_its_files_alone(tmp_path):
+    scene = _scene(tmp_path)
+    out = tmp_path / "o"
+    assert cli.main(["run", str(scene), "--out", str(out), "-q", "--variant", "fem"]) == 0
+    files = {p: p.stat().st_mtime_ns for p in (out / "fem").rglob("*") if p.is_file()}
+    assert cli.main(["run", "--resume", str(out), "-q"]) == 0
+    assert {p: p.stat().st_mtime_ns for p in (out / "fem").rglob("*") if p.is_file()} == files
+
+
+def test_the_fingerprint_is_the_same_in_another_process():
+    """Nothing process-specific (an address in a repr) may enter it: a resume would be refused."""
+    code = (
+        "import json, fem_elastic as fe\n"
+        "from fem_elastic.checkpoint import run_fingerprint\n"
+        "m = fe.Model(fe.beam_mesh(cells=(2, 1, 1)), density=1000.0, body=fe.MassSpring(E=1e5, nu=0.25),\n"
+        "             fixed='left', ground=fe.Ground(z=-1.0), damping=fe.Rayleigh(0.1, 0.0),\n"
+        "             driven={'right': fe.Twist(0.5, duration=0.1)})\n"
+        "i = fe.ImplicitEuler(linear_solver=fe.AMGSolver(rtol=1e-6))\n"
+        "print(json.dumps(run_fingerprint(m, i, 0.01, 5, 1, fe.State.rest(m), 1.0)))\n"
+    )
+    prints = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+              for _ in range(2)]
+    assert prints[0] == prints[1]
+    assert "0x7f" not in prints[0] and "van_gelder_stiffness" in prints[0]
