@@ -81,9 +81,16 @@ def is_psd_3x3(H: np.ndarray) -> np.ndarray:
 
 
 def _clamp_3x3(H: np.ndarray) -> np.ndarray:
-    """Copy of H (3, 3, N) with negative eigenvalues set to zero (eigh only where needed)."""
+    """Copy of H (3, 3, N) with negative eigenvalues set to zero (eigh only where needed).
+
+    Points with a non-finite entry (an inadmissible F of a barrier energy) come out
+    all NaN: LAPACK's eigh cannot take them (it raises for the whole batch).
+    """
     H = H.copy()
-    bad = np.flatnonzero(~is_psd_3x3(H))
+    finite = np.isfinite(H).all(axis=(0, 1))
+    H[..., ~finite] = np.nan
+    with np.errstate(invalid="ignore"):
+        bad = np.flatnonzero(~is_psd_3x3(H) & finite)
     if bad.size:
         w, Q = np.linalg.eigh(np.moveaxis(H[..., bad], -1, 0))
         np.maximum(w, 0.0, out=w)
@@ -208,15 +215,17 @@ def project_psd(
     True
     """
     U, s, V = signed_svd(F)
-    H, lt, lf = eigensystem(s)
-    bad = np.flatnonzero((lt < 0).any(axis=0) | (lf < 0).any(axis=0) | ~is_psd_3x3(H))
-    if bad.size > DENSE_FRACTION * s.shape[-1]:
-        return isotropic_hessian(U, s, V, H, lt, lf, clamp=True)
-    C = hessian(F)
-    if bad.size:
-        C[..., bad] = isotropic_hessian(
-            U[..., bad], s[:, bad], V[..., bad], H[..., bad], lt[:, bad], lf[:, bad], clamp=True
-        )
+    # NaN at inadmissible points (Neo-Hookean at det F <= 0) stays NaN, quietly
+    with np.errstate(invalid="ignore"):
+        H, lt, lf = eigensystem(s)
+        bad = np.flatnonzero((lt < 0).any(axis=0) | (lf < 0).any(axis=0) | ~is_psd_3x3(H))
+        if bad.size > DENSE_FRACTION * s.shape[-1]:
+            return isotropic_hessian(U, s, V, H, lt, lf, clamp=True)
+        C = hessian(F)
+        if bad.size:
+            C[..., bad] = isotropic_hessian(
+                U[..., bad], s[:, bad], V[..., bad], H[..., bad], lt[:, bad], lf[:, bad], clamp=True
+            )
     return C
 
 

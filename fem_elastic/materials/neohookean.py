@@ -189,8 +189,9 @@ class NeoHookean(IsotropicMaterial):
         (0, 800000)
         """
         mu, lam = self.mu, self.lam
-        with np.errstate(divide="ignore", invalid="ignore"):
-            g = lam * np.log(s[0] * s[1] * s[2]) - mu
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            # ln J as a sum: s_0 s_1 s_2 may over- or underflow where ln J does not
+            g = lam * (np.log(s[0]) + np.log(s[1]) + np.log(s[2])) - mu
             inv = 1.0 / s
         H = lam * inv[:, None] * inv[None, :]
         for a in range(3):

@@ -174,8 +174,9 @@ def _signed_svd_flat(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
         w = FV[:, 1] - proj * U[:, 0]
         s[1] = np.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
         U[:, 1] = w / s[1]
-    U[:, 2] = _cross(U[:, 0], U[:, 1])
-    s[2] = U[0, 2] * FV[0, 2] + U[1, 2] * FV[1, 2] + U[2, 2] * FV[2, 2]
+        # (inf or NaN columns where s[0] or s[1] is ~0: those points go to LAPACK below)
+        U[:, 2] = _cross(U[:, 0], U[:, 1])
+        s[2] = U[0, 2] * FV[0, 2] + U[1, 2] * FV[1, 2] + U[2, 2] * FV[2, 2]
     bad = np.flatnonzero(~(s[1] > _FALLBACK_RATIO * s[0]) | ~np.isfinite(s[2]))
     if bad.size:
         U[..., bad], s[:, bad], V[..., bad] = _lapack_signed_svd(F[..., bad])
