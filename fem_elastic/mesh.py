@@ -67,6 +67,8 @@ SIZE_RANGE = (1e-30, 1e30)
 RESOLUTION = 1e-6
 
 _MAX_LISTED = 10
+#: skfem numbers vertices in int32 arrays (``mesh.t``)
+_MAX_VERTICES = np.iinfo(np.int32).max
 
 
 def _listed(indices) -> str:
@@ -687,8 +689,8 @@ def beam_mesh(
     Raises
     ------
     InvalidParameter
-        A dimension is not positive and finite, or ``cells`` is not three
-        positive integers.
+        A dimension is not positive and finite, ``cells`` is not three
+        positive integers, or the mesh would not fit in int32 indices or in memory.
 
     Examples
     --------
@@ -714,8 +716,22 @@ def beam_mesh(
         isinstance(n, numbers.Integral) and not isinstance(n, bool) and n > 0 for n in cells
     ):
         raise InvalidParameter(f"cells must be 3 positive integers (nx, ny, nz), got {cells!r}.")
+    n_vertices = (cells[0] + 1) * (cells[1] + 1) * (cells[2] + 1)
+    if n_vertices > _MAX_VERTICES:
+        raise InvalidParameter(
+            f"cells = {tuple(int(n) for n in cells)} gives {n_vertices:.3g} vertices and "
+            f"{6 * cells[0] * cells[1] * cells[2]:.3g} tets, more than the {_MAX_VERTICES} "
+            "vertices skfem's 32-bit element indices can number. Use fewer cells."
+        )
     axes = [np.linspace(0.0, d, int(n) + 1) for d, n in zip(dims, cells)]
-    mesh = reorient(MeshTet.init_tensor(*axes))
+    try:
+        mesh = reorient(MeshTet.init_tensor(*axes))
+    except MemoryError:
+        raise InvalidParameter(
+            f"cells = {tuple(int(n) for n in cells)} gives {n_vertices:.3g} vertices and "
+            f"{6 * cells[0] * cells[1] * cells[2]:.3g} tets, which do not fit in memory "
+            "here. Use fewer cells."
+        ) from None
     # init_tensor puts the end coordinates exactly (linspace endpoints), but
     # compare with a tolerance relative to the cell size to be robust.
     tol = [1e-9 * d / n for d, n in zip(dims, cells)]
