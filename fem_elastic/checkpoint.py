@@ -97,14 +97,32 @@ def _describe(value, depth: int = 0):
         return [_describe(v, depth + 1) for v in value]
     if isinstance(value, dict):
         return {str(k): _describe(v, depth + 1) for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}
-    if isinstance(value, (types.FunctionType, types.BuiltinFunctionType, types.MethodType, type)):
-        # by name, never by repr: a repr holds the address, which differs from process to process
+    if isinstance(value, types.FunctionType):
+        # by name and by what it computes (code, constants, defaults, captured values); never
+        # by repr, which holds an address that differs from process to process
+        code = value.__code__
+        cells = [c.cell_contents for c in (value.__closure__ or ()) if _cell_has_value(c)]
+        return {"function": f"{value.__module__}.{value.__qualname__}",
+                "code": _sha(np.frombuffer(code.co_code, dtype=np.uint8)),
+                "constants": _describe([c for c in code.co_consts if not isinstance(c, types.CodeType)],
+                                       depth + 1),
+                "defaults": _describe(list(value.__defaults__ or ()), depth + 1),
+                "closure": _describe(cells, depth + 1)}
+    if isinstance(value, (types.BuiltinFunctionType, types.MethodType, type)):
         return f"{getattr(value, '__module__', '')}.{getattr(value, '__qualname__', type(value).__name__)}"
     fields = getattr(value, "__dict__", None)
     if fields is None or depth > 3:
         return type(value).__name__
     return {"class": type(value).__name__,
             **{k: _describe(v, depth + 1) for k, v in sorted(fields.items()) if not k.startswith("_")}}
+
+
+def _cell_has_value(cell) -> bool:
+    try:
+        cell.cell_contents
+    except ValueError:  # an empty cell (a name not yet bound)
+        return False
+    return True
 
 
 def _settings(integrator) -> dict:
@@ -273,32 +291,33 @@ def load_checkpoint(directory) -> Checkpoint:
         meta = json.loads(str(arrays.pop("meta")))
         scalars = arrays.pop("scalars")
         x, v = arrays.pop("x"), arrays.pop("v")
-    except (OSError, ValueError, KeyError, json.JSONDecodeError) as exc:
+        if meta.get("format") != FORMAT:
+            raise InvalidParameter(
+                f"the checkpoint {path} has format {meta.get('format')!r}, this version reads "
+                f"{FORMAT}; remove the directory to start afresh."
+            )
+        t, e_ref, scale, wall = (float(s) for s in scalars)
+        n_frames, step, n_cuts, cuts_bytes = (int(meta[k]) for k in ("n_frames", "step", "n_cuts", "cuts_bytes"))
+        frame_size, n_steps, driving = int(meta["frame_size"]), int(meta["n_steps"]), bool(meta["driving"])
+        fingerprint, dt = meta["fingerprint"], float.fromhex(meta["fingerprint"]["dt"])
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
         raise InvalidParameter(
             f"the checkpoint {path} cannot be read ({type(exc).__name__}: {exc}); remove the "
             "directory to start the run afresh."
         ) from None
-    if meta.get("format") != FORMAT:
-        raise InvalidParameter(
-            f"the checkpoint {path} has format {meta.get('format')!r}, this version reads {FORMAT}; "
-            "remove it to start afresh."
-        )
-    t, e_ref, scale, wall = (float(s) for s in scalars)
     integ = {k[len("integrator/"):]: a for k, a in arrays.items() if k.startswith("integrator/")}
-    n_frames, step = meta["n_frames"], meta["step"]
-    frames = _read_records(d / FRAMES_NAME, n_frames, meta["frame_size"])
+    frames = _read_records(d / FRAMES_NAME, n_frames, frame_size)
     steps = _read_records(d / STEPS_NAME, step, len(STEP_FIELDS))
     stats = {}
     for i, name in enumerate(STEP_FIELDS):
         col = steps[:, i]
         stats[name] = col.astype(np.int64) if name in COUNT_FIELDS else col.copy()
-    cuts = _read_cuts(d / CUTS_NAME, meta["n_cuts"], meta["cuts_bytes"])
+    cuts = _read_cuts(d / CUTS_NAME, n_cuts, cuts_bytes)
     return Checkpoint(
-        directory=d, step=step, n_steps=meta["n_steps"], state=State(x, v, t),
-        integrator_state=integ, fingerprint=meta["fingerprint"], e_ref=e_ref, scale=scale,
-        driving=bool(meta["driving"]), wall_time=wall, frames=frames, step_stats=stats, cuts=cuts,
-        integrator=meta["fingerprint"].get("integrator", ""),
-        dt=float.fromhex(meta["fingerprint"]["dt"]),
+        directory=d, step=step, n_steps=n_steps, state=State(x, v, t),
+        integrator_state=integ, fingerprint=fingerprint, e_ref=e_ref, scale=scale,
+        driving=driving, wall_time=wall, frames=frames, step_stats=stats, cuts=cuts,
+        integrator=fingerprint.get("integrator", ""), dt=dt,
     )
 
 

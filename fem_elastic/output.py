@@ -128,7 +128,9 @@ def remove_temporary_files(run_dir) -> None:
     renames it; only a process killed outright (no handler runs) leaves one.
     """
     run_dir = Path(run_dir)
-    for tmp in [*run_dir.glob(".*.tmp"), *(run_dir / FRAMES_DIR).glob(".frame_*.tmp")]:
+    ours = [run_dir.glob(f".{PVD_NAME}.*.tmp"), run_dir.glob(f".{SUMMARY_NAME}.*.tmp"),
+            (run_dir / FRAMES_DIR).glob(".frame_*.vtu.*.tmp")]
+    for tmp in [p for found in ours for p in found]:
         tmp.unlink(missing_ok=True)
 
 

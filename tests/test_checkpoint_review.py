@@ -243,9 +243,6 @@ def test_a_resume_sweeps_the_temporary_files_a_kill_left(tmp_path):
 # -- second round: the review fixes (d3864db) -------------------------------------------------
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "load_checkpoint reads meta['cuts_bytes'] outside its try: a FORMAT 1 checkpoint written "
-    "before d3864db (no 'cuts_bytes') raises a bare KeyError; bump FORMAT or raise InvalidParameter"))
 def test_a_checkpoint_without_the_cuts_byte_count_is_a_typed_error(tmp_path):
     model = _beam(gravity=(0, 0, -9.81))
     d = tmp_path / "ck"
@@ -262,10 +259,6 @@ def test_a_checkpoint_without_the_cuts_byte_count_is_a_typed_error(tmp_path):
         fe.load_checkpoint(d)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "checkpoint._describe names a function by module and qualname only: two closures of one "
-    "factory (another amplitude) describe alike, so a Prescribed motion that differs only after "
-    "t0 resumes silently; hash the code, constants, defaults and closure values"))
 def test_resuming_with_another_prescribed_motion_is_refused(tmp_path):
     def rising(amplitude):  # at rest until 0.03 s, so the initial states are the same
         return lambda X, t: np.outer(np.ones(len(X)), [0.0, 0.0, amplitude * max(t - 0.03, 0.0) ** 2])
@@ -282,9 +275,6 @@ def test_resuming_with_another_prescribed_motion_is_refused(tmp_path):
         fe.simulate(model(-5.0), fe.ImplicitEuler(), 0.02, steps=8, checkpoint_dir=d, resume=True)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "output.remove_temporary_files globs '.*.tmp' in run_dir: a SeriesWriter pointed at a folder "
-    "deletes any hidden .tmp file there, not only the ones io._atomic_write makes for its own files"))
 def test_a_series_writer_leaves_unrelated_temporary_files_alone(tmp_path):
     mine = tmp_path / ".notes.tmp"
     mine.write_text("not the writer's")
