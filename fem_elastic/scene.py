@@ -336,6 +336,10 @@ def parse_scene(text: str, *, source: str = "<string>", base_dir=".") -> "Scene"
     ...     print(err.key, err.line, err.suggestion)
     mesh.kind 2 beam
     """
+    if not isinstance(text, str):
+        raise SceneError(
+            f"a scene is TOML text (str), got {type(text).__name__}; read the file first "
+            "(fe.load_scene(path) does), or decode bytes with .decode('utf-8').", file=source)
     try:
         document = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -547,7 +551,8 @@ class Scene:
         ------
         SceneError
             A boundary the mesh does not have, a mesh file that cannot be
-            read, a vertex index out of range, or an unknown variant name.
+            read, a vertex index out of range, an unknown variant name, or
+            more steps (duration / dt) than a run takes.
         """
         names = list(self.variants) if variants is None else list(variants)
         for name in names:
@@ -557,6 +562,7 @@ class Scene:
                 raise SceneError(f'the scene has no run "{name}"{hint} Its runs: '
                                  f'{", ".join(self.variants)}.', key="variants", file=self.source,
                                  suggestion=near)
+        self._steps()  # before the mesh: a wrong time table is cheap to tell
         mesh, mesh_info = self._mesh()
         self._check_boundaries(mesh)
         return [self._run(name, mesh, mesh_info) for name in names]
@@ -608,6 +614,21 @@ class Scene:
         info["n_vertices"], info["n_tets"] = int(mesh.p.shape[1]), int(mesh.t.shape[1])
         info["boundaries"] = sorted(mesh.boundaries or {})
         return mesh, info
+
+    def _steps(self) -> int:
+        """``ceil(duration / dt)``, checked against what :func:`fem_elastic.simulate` runs."""
+        from .simulate import _MAX_STEPS
+
+        dt, duration = self.spec["time"]["dt"], self.spec["time"]["duration"]
+        ratio = duration / dt  # both finite and > 0 (the schema): inf only by overflow
+        if not ratio <= _MAX_STEPS:
+            raise self._error(
+                ("time", "duration"),
+                f"duration = {duration:g} s at dt = {dt:g} s is {ratio:.3g} steps, more than the "
+                f"{_MAX_STEPS:.0e} a run takes: raise dt or shorten the duration (or split the run "
+                "and continue it with fem-elastic run --resume).")
+        # 1e-9: duration / dt in floating point may land a hair above an integer
+        return max(1, math.ceil(ratio - 1e-9))
 
     def _check_boundaries(self, mesh) -> None:
         names = sorted(mesh.boundaries or {})
@@ -703,9 +724,8 @@ class Scene:
         body, bpath, integ, ipath = self._variant(name)
         model = self._guard(bpath, Model, mesh, body["density"], self._body(body, bpath), **self._terms())
         integrator = self._guard(ipath, make_integrator, integ)
-        dt, duration = spec["time"]["dt"], spec["time"]["duration"]
-        # 1e-9: duration / dt in floating point may land a hair above an integer
-        steps = max(1, math.ceil(duration / dt - 1e-9))
+        dt = spec["time"]["dt"]
+        steps = self._steps()
         initial = spec["initial"]
         state = State.rest(model) if initial is None else self._guard(
             ("initial", "velocity"), State.rest, model, velocity=tuple(initial["velocity"]))

@@ -253,7 +253,10 @@ class Number(Type):
                 except ValueError:
                     hint = ""
             raise Invalid(path, f"{name} must be a number{_unit(unit)}, {_got(value)}.{hint}")
-        v = float(value)
+        try:
+            v = float(value)
+        except OverflowError:  # an integer beyond the float range (TOML integers are unbounded here)
+            v = math.inf
         if not math.isfinite(v):
             raise Invalid(path, f"{name} must be a finite number{_unit(unit)}, {_got(value)}.")
         bad = (

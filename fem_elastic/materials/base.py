@@ -57,7 +57,11 @@ def _check_E_nu(E, nu) -> None:
             raise InvalidParameter(
                 f"{name} must be a real number, got {value!r} of type {type(value).__name__}."
             )
-        if not math.isfinite(float(value)):
+        try:
+            finite = math.isfinite(float(value))
+        except OverflowError:  # an int beyond the float range
+            finite = False
+        if not finite:
             raise InvalidParameter(f"{name} must be finite, got {value!r}.")
     if E <= 0:
         raise InvalidParameter(
