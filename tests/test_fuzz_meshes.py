@@ -23,6 +23,7 @@ import warnings
 
 import numpy as np
 import pytest
+import skfem
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
@@ -213,15 +214,39 @@ def check_assembly(mesh) -> None:
         assert str(err)
 
 
+def _raw_mesh(P, T):
+    """The same arrays as a MeshTet built directly (what a user of skfem passes to
+    fe.Model), or None where they are not numeric (n, 3) and (m, 4) arrays, or where
+    skfem's int32 connectivity would wrap an index."""
+    try:
+        P, T = np.asarray(P), np.asarray(T)
+    except ValueError:
+        return None
+    if P.dtype.kind not in "iuf" or T.dtype.kind not in "iu" or P.ndim != 2 or T.ndim != 2 \
+            or P.shape[1] != 3 or T.shape[1] != 4 or not len(T) or not len(P):
+        return None
+    if np.abs(T).max() > np.iinfo(np.int32).max:
+        return None  # skfem stores t as int32 and wraps 2**40 to 0 silently: nothing to check
+    return skfem.MeshTet(np.ascontiguousarray(P.T, dtype=float), np.ascontiguousarray(T.T))
+
+
 def run_case(P, T) -> str:
-    """'rejected' or 'accepted'; fails on anything else."""
+    """'rejected' or 'accepted'; fails on anything else.
+
+    mesh_from_arrays and validate_mesh on a MeshTet of the same arrays agree.
+    """
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)  # an overflow or NaN on the way is a hole
+        raw = _raw_mesh(P, T)
         try:
             mesh = fe.mesh_from_arrays(P, T)
         except fe.InvalidMesh as err:
             check_message(err)
+            if raw is not None:
+                with pytest.raises(fe.InvalidMesh):
+                    fe.validate_mesh(raw)
             return "rejected"
+        assert fe.validate_mesh(raw) is raw
         check_assembly(mesh)
     return "accepted"
 
