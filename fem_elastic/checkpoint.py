@@ -89,6 +89,10 @@ def _describe(value, depth: int = 0):
     and objects by their class and public attributes (recursively, a few levels deep)."""
     if value is None or isinstance(value, (bool, int, str)):
         return value
+    if isinstance(value, np.generic):
+        value = value.item()
+        if not isinstance(value, (bool, int, float, str)):
+            return str(value)
     if isinstance(value, float):
         return value.hex()
     if isinstance(value, np.ndarray):
@@ -104,6 +108,7 @@ def _describe(value, depth: int = 0):
         cells = [c.cell_contents for c in (value.__closure__ or ()) if _cell_has_value(c)]
         return {"function": f"{value.__module__}.{value.__qualname__}",
                 "code": _sha(np.frombuffer(code.co_code, dtype=np.uint8)),
+                "names": list(code.co_names),  # the globals and attributes it uses (np.sin, np.tan)
                 "constants": _describe([c for c in code.co_consts if not isinstance(c, types.CodeType)],
                                        depth + 1),
                 "defaults": _describe(list(value.__defaults__ or ()), depth + 1),
@@ -210,6 +215,8 @@ class Checkpoint:
         The integrator's name.
     dt : float
         Time step (s).
+    cuts_bytes : int
+        Bytes of ``cuts.jsonl`` that belong to this checkpoint.
     """
 
     directory: Path
@@ -227,6 +234,7 @@ class Checkpoint:
     cuts: list = field(default_factory=list)
     integrator: str = ""
     dt: float = 0.0
+    cuts_bytes: int = 0
 
     @property
     def complete(self) -> bool:
@@ -317,7 +325,7 @@ def load_checkpoint(directory) -> Checkpoint:
         directory=d, step=step, n_steps=n_steps, state=State(x, v, t),
         integrator_state=integ, fingerprint=fingerprint, e_ref=e_ref, scale=scale,
         driving=driving, wall_time=wall, frames=frames, step_stats=stats, cuts=cuts,
-        integrator=fingerprint.get("integrator", ""), dt=dt,
+        integrator=fingerprint.get("integrator", ""), dt=dt, cuts_bytes=cuts_bytes,
     )
 
 
@@ -387,7 +395,7 @@ class Checkpointer:
             self.n_frames = self.n_steps = self.n_cuts = self.cuts_bytes = 0
         else:
             self.n_frames, self.n_steps, self.n_cuts = len(resume.frames), resume.step, len(resume.cuts)
-            self.cuts_bytes = len(_cut_lines(resume.cuts))
+            self.cuts_bytes = resume.cuts_bytes
         self.last_step = self.n_steps
         for tmp in self.directory.glob(f".{CHECKPOINT_NAME}.*.tmp"):  # what a kill mid-write left
             tmp.unlink(missing_ok=True)

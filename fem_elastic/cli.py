@@ -87,7 +87,10 @@ def _print_outcomes(out, outcomes, rendered, out_dir) -> None:
     for o in outcomes:
         traj = o.trajectory
         if o.status == "completed" and traj is not None and traj.resumed_from_step is not None:
-            out(f"{o.name}: resumed from its checkpoint at step {traj.resumed_from_step}")
+            if traj.resumed_from_step < traj.steps:
+                out(f"{o.name}: resumed from its checkpoint at step {traj.resumed_from_step}")
+            else:
+                out(f"{o.name}: had finished; its files are left as they were")
         if traj is not None and traj.cuts:
             first = traj.cuts[0]
             out(f"{o.name}: {traj.dt_cuts} steps cut ({len(traj.cuts)} failed attempts), the first at "

@@ -124,7 +124,21 @@ class ElasticPotential(Potential):
         with a factor 3 for the three diagonal entries of F.
         """
         m = self.material
-        return 3.0 * np.finfo(float).eps * (m.mu + abs(m.lam)) * float(self.space.dx.sum())
+        return (3.0 * np.finfo(float).eps * self._offset_factor() * (m.mu + abs(m.lam))
+                * float(self.space.dx.sum()))
+
+    def _offset_factor(self) -> float:
+        """How much larger than the body's size its coordinates are (>= 1).
+
+        Positions are stored absolutely, so u = x - X carries an absolute error
+        of eps |X|: the estimates below assume coordinates of the order of the
+        body's size (eps relative to it), and grow by max|X| / size for a body
+        placed far from the origin (a steel beam 100 m away otherwise never met
+        Newton's floor).
+        """
+        X = self.space.X.reshape(-1, 3)
+        size = float(np.ptp(X, axis=0).max())
+        return max(1.0, float(np.abs(X).max()) / size) if size > 0 else 1.0
 
     def gradient_roundoff(self) -> float:
         """Norm of the round-off in :meth:`gradient` (N): the floor under ||g||.
@@ -133,7 +147,8 @@ class ElasticPotential(Potential):
         absolute error of about eps; the material subtracts I again (in
         eps = sym F - I, in F - F^-T, ...), so each stress component carries
         ~ eps (2 mu + lam) whatever the load. Through the force contraction
-        this gives eps (2 mu + lam) sum_q |dN_a| dx per DOF. For a stiff
+        this gives eps (2 mu + lam) sum_q |dN_a| dx per DOF (times
+        :meth:`_offset_factor` for a body far from the origin). For a stiff
         material under a small load this floor lies above rtol ||f_ext||, and
         no iterate can do better: Newton stops when it reaches it.
         """
@@ -142,7 +157,7 @@ class ElasticPotential(Potential):
         w = np.einsum("ajeq,eq->ae", np.abs(s.dN), s.dx)  # sum_j |dN_a,j| dx per element node
         per_node = np.bincount(s.element_dofs[0::3].ravel() // 3, weights=w.ravel(),
                                minlength=s.ndofs // 3)
-        eps = np.finfo(float).eps
+        eps = np.finfo(float).eps * self._offset_factor()
         return float(eps * (2.0 * m.mu + abs(m.lam)) * np.sqrt(3.0) * np.linalg.norm(per_node))
 
     def gradient(self, x: np.ndarray) -> np.ndarray:

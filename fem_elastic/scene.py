@@ -617,15 +617,15 @@ class Scene:
 
     def _steps(self) -> int:
         """``ceil(duration / dt)``, checked against what :func:`fem_elastic.simulate` runs."""
-        from .simulate import _MAX_STEPS
+        from .simulate import MAX_STEPS
 
         dt, duration = self.spec["time"]["dt"], self.spec["time"]["duration"]
         ratio = duration / dt  # both finite and > 0 (the schema): inf only by overflow
-        if not ratio <= _MAX_STEPS:
+        if not ratio <= MAX_STEPS:
             raise self._error(
                 ("time", "duration"),
                 f"duration = {duration:g} s at dt = {dt:g} s is {ratio:.3g} steps, more than the "
-                f"{_MAX_STEPS:.0e} a run takes: raise dt or shorten the duration (or split the run "
+                f"{MAX_STEPS:.0e} a run takes: raise dt or shorten the duration (or split the run "
                 "and continue it with fem-elastic run --resume).")
         # 1e-9: duration / dt in floating point may land a hair above an integer
         return max(1, math.ceil(ratio - 1e-9))

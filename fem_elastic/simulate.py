@@ -302,7 +302,8 @@ def _collect_cuts(cuts, k, stats) -> None:
         cuts.append({"step": int(k), "t": float(t), "dt": float(dt), "reason": str(reason)})
 
 
-_MAX_STEPS = 10**8  # per-step statistics take 8 arrays of this length
+#: Most steps one call of simulate takes (its per-step statistics are 10 arrays of this length).
+MAX_STEPS = 10**8
 
 
 def _n_steps(h, t_end, steps, t0):
@@ -321,10 +322,17 @@ def _n_steps(h, t_end, steps, t0):
                 "absolute end time (use steps=N for a number of steps)."
             )
         # the first multiple of dt at or after t_end; 1e-9 absorbs round-off in the division
-        n = int(math.ceil((t_end - t0) / h - 1e-9))
-    if n > _MAX_STEPS:
+        ratio = (t_end - t0) / h
+        if not ratio <= MAX_STEPS:  # also inf: t_end - t0 overflows, or dt is tiny
+            raise InvalidParameter(
+                f"{ratio:.3g} steps asked (t_end = {t_end:g} s at dt = {h:g} s); at most "
+                f"{MAX_STEPS:.0e} per call: raise dt or split the run (simulate(..., "
+                "state=run.final_state))."
+            )
+        n = int(math.ceil(ratio - 1e-9))
+    if n > MAX_STEPS:
         raise InvalidParameter(
-            f"{n:.3g} steps asked (t_end / dt); at most {_MAX_STEPS:.0e} per call: raise dt or "
+            f"{n:.3g} steps asked (t_end / dt); at most {MAX_STEPS:.0e} per call: raise dt or "
             "split the run (simulate(..., state=run.final_state))."
         )
     return n

@@ -282,9 +282,6 @@ def test_a_series_writer_leaves_unrelated_temporary_files_alone(tmp_path):
     assert mine.exists()
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "checkpoint._describe hashes a function's bytecode and constants but not code.co_names: "
-    "np.sin and np.tan load by the same name index, so the two motions describe alike"))
 def test_resuming_with_a_motion_calling_another_function_is_refused(tmp_path):
     def model(fn):  # at rest until 0.03 s, so the initial states are the same
         return fe.Model(fe.beam_mesh(cells=(4, 1, 1)), density=1000.0,
