@@ -59,7 +59,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InvalidParameter
-from .io import _atomic_write, _fsync_directory
+from .io import _atomic_write
 from .state import State
 from .trajectory import COUNT_FIELDS, STEP_FIELDS, Trajectory
 

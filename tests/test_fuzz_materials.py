@@ -58,7 +58,6 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-import pytest
 from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
