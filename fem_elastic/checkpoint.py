@@ -247,16 +247,9 @@ class Checkpoint:
 
     def trajectory(self) -> Trajectory:
         """The frames recorded up to this checkpoint, as a :class:`Trajectory`."""
-        nv3 = (self.frames.shape[1] - 9) // 2
-        f = self.frames
-        kin, pot = f[:, 1].copy(), f[:, 2].copy()
-        traj = Trajectory(
-            times=f[:, 0].copy(), displacement=f[:, 9:9 + nv3].reshape(len(f), -1, 3),
-            velocity=f[:, 9 + nv3:].reshape(len(f), -1, 3), kinetic=kin, potential=pot,
-            total=kin + pot, linear_momentum=f[:, 3:6].copy(), angular_momentum=f[:, 6:9].copy(),
-            step_stats=dict(self.step_stats), wall_time=self.wall_time, steps=self.step,
-            dt=self.dt, integrator=self.integrator, final_state=self.state,
-            cuts=list(self.cuts),
+        traj = trajectory_from_records(
+            self.frames, step_stats=dict(self.step_stats), wall_time=self.wall_time, steps=self.step,
+            dt=self.dt, integrator=self.integrator, final_state=self.state, cuts=list(self.cuts),
         )
         traj.message = (f"completed {self.step} steps to t = {self.state.t:.6g} s" if self.complete
                         else f"checkpoint after {self.step} of {self.n_steps} steps")
@@ -266,6 +259,27 @@ class Checkpoint:
 def frame_record(t, u, v, kin, pot, lin, ang) -> np.ndarray:
     """One ``frames.f64`` record from a frame's values (see the module notes)."""
     return np.concatenate(([t, kin, pot], lin, ang, np.ravel(u), np.ravel(v)))
+
+
+def trajectory_from_records(frames, **fields) -> Trajectory:
+    """A :class:`Trajectory` from frame records (:func:`frame_record`) and its other ``fields``.
+
+    Parameters
+    ----------
+    frames : array_like
+        ``(T, 9 + 6 n_vertices)`` records.
+    **fields
+        The Trajectory's other attributes (``step_stats``, ``wall_time``, ...).
+    """
+    f = np.asarray(frames, dtype=float)
+    T = len(f)
+    nv3 = (f.shape[1] - 9) // 2
+    kin, pot = f[:, 1].copy(), f[:, 2].copy()
+    return Trajectory(
+        times=f[:, 0].copy(), displacement=f[:, 9:9 + nv3].reshape(T, -1, 3),
+        velocity=f[:, 9 + nv3:].reshape(T, -1, 3), kinetic=kin, potential=pot, total=kin + pot,
+        linear_momentum=f[:, 3:6].copy(), angular_momentum=f[:, 6:9].copy(), **fields,
+    )
 
 
 def load_checkpoint(directory) -> Checkpoint:
@@ -392,11 +406,10 @@ class Checkpointer:
         if resume is None:
             for name in (CHECKPOINT_NAME, FRAMES_NAME, STEPS_NAME, CUTS_NAME):
                 (self.directory / name).unlink(missing_ok=True)
-            self.n_frames = self.n_steps = self.n_cuts = self.cuts_bytes = 0
+            self.n_frames = self.last_step = self.n_cuts = self.cuts_bytes = 0
         else:
-            self.n_frames, self.n_steps, self.n_cuts = len(resume.frames), resume.step, len(resume.cuts)
+            self.n_frames, self.last_step, self.n_cuts = len(resume.frames), resume.step, len(resume.cuts)
             self.cuts_bytes = resume.cuts_bytes
-        self.last_step = self.n_steps
         for tmp in self.directory.glob(f".{CHECKPOINT_NAME}.*.tmp"):  # what a kill mid-write left
             tmp.unlink(missing_ok=True)
 
@@ -422,9 +435,9 @@ class Checkpointer:
         k, nf, nc = snapshot.step, snapshot.n_frames, snapshot.n_cuts
         self._append(d / FRAMES_NAME, self.n_frames, self.frame_size,
                      frames[self.n_frames:nf])
-        rows = np.column_stack([np.asarray(stats[name][self.n_steps:k], dtype=float)
-                                for name in STEP_FIELDS]) if k > self.n_steps else []
-        self._append(d / STEPS_NAME, self.n_steps, len(STEP_FIELDS), rows)
+        rows = np.column_stack([np.asarray(stats[name][self.last_step:k], dtype=float)
+                                for name in STEP_FIELDS]) if k > self.last_step else []
+        self._append(d / STEPS_NAME, self.last_step, len(STEP_FIELDS), rows)
         new_cuts = _cut_lines(cuts[self.n_cuts:nc])
         self._append_bytes(d / CUTS_NAME, self.cuts_bytes, new_cuts)
         cuts_bytes = self.cuts_bytes + len(new_cuts)
@@ -449,7 +462,7 @@ class Checkpointer:
                 fh.write(buf.getvalue())
 
         path = _atomic_write(d / CHECKPOINT_NAME, write)
-        self.n_frames, self.n_steps, self.n_cuts, self.last_step = nf, k, nc, k
+        self.n_frames, self.n_cuts, self.last_step = nf, nc, k
         self.cuts_bytes = cuts_bytes
         log.debug("checkpoint after %d steps (t = %.6g s) in %s", k, s.t, d)
         return path

@@ -120,16 +120,14 @@ def _collapse_pngs(paths, out_dir):
     return lines
 
 
-def _run_scene_command(scene, args, out) -> int:
+def _run_scene_command(scene, out_dir, out, **options) -> int:
+    """Run (or resume) a scene through :func:`run_scene`, report it, and return the exit status."""
     from .runner import SceneInterrupted, run_scene
 
-    out_dir = Path(args.out)
+    out_dir = Path(out_dir)
     t0 = time.perf_counter()
     try:
-        outcomes, rendered = run_scene(
-            scene, out_dir, variants=args.variant or None, progress=not args.quiet,
-            render=not args.no_render, checkpoint_every=args.checkpoint_every,
-        )
+        outcomes, rendered = run_scene(scene, out_dir, **options)
     except SceneInterrupted as stop:
         return _interrupted(stop, out_dir, scene, time.perf_counter() - t0)
     return _finish_scene_command(scene, out_dir, outcomes, rendered, t0, out)
@@ -189,25 +187,23 @@ def _run(args) -> int:
         )
     scene = load_scene(args.scene)
     out(f"scene {scene.name!r} from {args.scene}: variants {', '.join(scene.variants)}")
-    return _run_scene_command(scene, args, out)
+    return _run_scene_command(
+        scene, args.out, out, variants=args.variant or None, progress=not args.quiet,
+        render=not args.no_render, checkpoint_every=args.checkpoint_every,
+    )
 
 
 def _resume(args, out) -> int:
-    from .runner import SceneInterrupted, read_resumable, run_scene
+    from .runner import read_resumable
 
     out_dir = Path(args.resume)
     scene, record = read_resumable(out_dir)
     out(f"resuming scene {scene.name!r} in {out_dir} from its checkpoints")
-    t0 = time.perf_counter()
-    try:
-        outcomes, rendered = run_scene(
-            scene, out_dir, variants=record.get("variants"), progress=not args.quiet,
-            render=False if args.no_render else record.get("render", True),
-            checkpoint_every=record.get("checkpoint_every"), resume=True,
-        )
-    except SceneInterrupted as stop:
-        return _interrupted(stop, out_dir, scene, time.perf_counter() - t0)
-    return _finish_scene_command(scene, out_dir, outcomes, rendered, t0, out)
+    return _run_scene_command(
+        scene, out_dir, out, variants=record.get("variants"), progress=not args.quiet,
+        render=False if args.no_render else record.get("render", True),
+        checkpoint_every=record.get("checkpoint_every"), resume=True,
+    )
 
 
 def _demo(args) -> int:

@@ -135,7 +135,7 @@ def run_variant(run, out_dir, *, progress: bool = False, checkpoint_every: int |
         remove_temporary_files(run_dir)
         traj = simulate(run.model, run.integrator, run.dt, steps=run.steps, state=run.state,
                         record_every=run.record_every, checkpoint_dir=ck_dir, checkpoint_every=every,
-                        resume=True)  # checks the checkpoint is this run's, returns its trajectory
+                        resume=start)  # checks the checkpoint is this run's, returns its trajectory
         return RunOutcome(run.name, run_dir, "completed", traj.message, traj, 0.0, 0.0, run)
     # n_steps: the callback writes the last frame, before simulate's final checkpoint
     writer = SeriesWriter(run.model, run_dir, every=run.record_every, n_steps=run.steps, info=run.info,
@@ -147,7 +147,7 @@ def run_variant(run, out_dir, *, progress: bool = False, checkpoint_every: int |
         traj = simulate(
             run.model, run.integrator, run.dt, steps=run.steps, state=run.state,
             record_every=run.record_every, progress=progress, callback=writer.callback,
-            checkpoint_dir=ck_dir, checkpoint_every=every, resume=start is not None,
+            checkpoint_dir=ck_dir, checkpoint_every=every, resume=start or False,
         )
     except Diverged as err:
         elapsed = time.perf_counter() - t0

@@ -39,7 +39,7 @@ import numpy as np
 
 from .errors import Diverged, InvalidParameter
 from .integrators.base import check_dt, check_state
-from .checkpoint import _Snapshot, frame_record
+from .checkpoint import Checkpoint, _Snapshot, frame_record, trajectory_from_records
 from .state import State
 from .trajectory import COUNT_FIELDS, STEP_FIELDS, Trajectory
 
@@ -68,7 +68,7 @@ def simulate(
     callback=None,
     checkpoint_dir=None,
     checkpoint_every: int = 0,
-    resume: bool = False,
+    resume=False,
 ) -> Trajectory:
     """Integrate ``model`` in time.
 
@@ -108,9 +108,10 @@ def simulate(
         appended, not rewritten.
     checkpoint_every : int
         Steps between checkpoints (0: only on Ctrl-C and at the end).
-    resume : bool
+    resume : bool or Checkpoint
         Continue from the checkpoint in ``checkpoint_dir`` if there is one
-        (else start afresh). It must come from the same run: the same model,
+        (else start afresh), or from this :class:`fe.Checkpoint` of it, read
+        already with :func:`fe.load_checkpoint`. It must come from the same run: the same model,
         integrator and settings, dt, steps, ``record_every`` and initial
         state (else :class:`fe.InvalidParameter`). The Trajectory returned is
         the whole run's, bit for bit what the uninterrupted run records
@@ -202,7 +203,7 @@ def simulate(
                 new = integrator.step(model, state, h)
             except Diverged as err:
                 _collect_cuts(cuts, k, getattr(integrator, "last_stats", None))
-                raise _diverged(err.reason or str(err), k, state, rec, stats, k, t_start, integrator, h,
+                raise _diverged(err.reason or str(err), k, state, rec, stats, t_start, integrator, h,
                                 cuts, str(err), wall0) from err
             stats["seconds_step"][k] = time.perf_counter() - t0
             st = integrator.last_stats
@@ -212,7 +213,7 @@ def simulate(
                 stats[f"seconds_{name}"][k] = st.seconds.get(name, 0.0)
             _collect_cuts(cuts, k, st)
             if not (np.isfinite(new.x).all() and np.isfinite(new.v).all()):
-                raise _diverged("non-finite positions or velocities", k, state, rec, stats, k,
+                raise _diverged("non-finite positions or velocities", k, state, rec, stats,
                                 t_start, integrator, h, cuts, None, wall0)
             last = k == n_steps - 1
             was_driving, driving = driving, model.driving(new.t)
@@ -222,14 +223,14 @@ def simulate(
                 e = rec.energies(new)
                 if not math.isfinite(e[2]):
                     raise _diverged("the energy is not finite (an inverted element?)", k, state, rec,
-                                    stats, k, t_start, integrator, h, cuts, None, wall0)
+                                    stats, t_start, integrator, h, cuts, None, wall0)
                 if released:  # the drive stopped: the energy from here on is the budget
                     e_ref, scale = e[2], max(scale, abs(e[2]))
                 elif not driving and e[2] > e_ref + energy_growth * scale:
                     raise _diverged(
                         f"the total energy grew from {e_ref:.6g} J to {e[2]:.6g} J (more than "
                         f"{energy_growth:g} x the scene's energy scale {scale:.3g} J) with no "
-                        "energy source", k, state, rec, stats, k, t_start, integrator, h, cuts, None, wall0,
+                        "energy source", k, state, rec, stats, t_start, integrator, h, cuts, None, wall0,
                     )
                 if record:
                     rec.record(new, e)
@@ -289,7 +290,10 @@ def _checkpointer(model, integrator, h, n_steps, record_every, state0, energy_gr
         raise InvalidParameter(f"checkpoint_dir {d} is a file; give a directory.")
     fingerprint = run_fingerprint(model, integrator, h, n_steps, record_every, state0, energy_growth)
     start = None
-    if resume and (d / CHECKPOINT_NAME).is_file():
+    if isinstance(resume, Checkpoint):  # read already by the caller
+        start = resume
+        check_resumable(start, fingerprint)
+    elif resume and (d / CHECKPOINT_NAME).is_file():
         start = load_checkpoint(d)
         check_resumable(start, fingerprint)
     elif resume:
@@ -396,21 +400,16 @@ class _Recorder:
         return e[2]
 
     def trajectory(self, stats, n, wall, integrator, h, state, cuts):
-        f = np.array(self.frames).reshape(len(self.frames), self.frame_size)
-        nv3 = (self.frame_size - 9) // 2
-        kin, pot = f[:, 1].copy(), f[:, 2].copy()
-        return Trajectory(
-            times=f[:, 0].copy(), displacement=f[:, 9:9 + nv3].reshape(len(f), -1, 3),
-            velocity=f[:, 9 + nv3:].reshape(len(f), -1, 3), kinetic=kin, potential=pot,
-            total=kin + pot, linear_momentum=f[:, 3:6].copy(), angular_momentum=f[:, 6:9].copy(),
+        return trajectory_from_records(
+            np.reshape(self.frames, (len(self.frames), self.frame_size)),
             step_stats={k: v[:n] for k, v in stats.items()}, wall_time=wall, steps=n, dt=h,
-            integrator=getattr(integrator, "name", str(integrator)), final_state=state,
-            cuts=list(cuts),
+            integrator=getattr(integrator, "name", str(integrator)), final_state=state, cuts=list(cuts),
         )
 
 
-def _diverged(reason, k, state, rec, stats, n_done, t_start, integrator, h, cuts, detail=None, wall0=0.0):
-    traj = rec.trajectory(stats, n_done, wall0 + time.perf_counter() - t_start, integrator, h, state, cuts)
+def _diverged(reason, k, state, rec, stats, t_start, integrator, h, cuts, detail=None, wall0=0.0):
+    """fe.Diverged at step k, with the frames recorded up to the last good state (k steps taken)."""
+    traj = rec.trajectory(stats, k, wall0 + time.perf_counter() - t_start, integrator, h, state, cuts)
     traj.message = f"diverged at step {k}: {reason}"
     if getattr(integrator, "explicit", True):
         advice = "Try a smaller dt, an implicit integrator (fe.ImplicitEuler), or damping."

@@ -121,8 +121,11 @@ def test_newmark_resume_needs_the_remembered_acceleration(tmp_path):
     np.savez(d / CHECKPOINT_NAME, **arrays)
     resumed = fe.simulate(model, fe.Newmark(), dt, steps=12, state=state, checkpoint_dir=d, resume=True)
     diff = np.abs(resumed.displacement - full.displacement).max()
-    assert diff > 0.0  # a different (equally valid) trajectory, within the scheme's error
-    assert diff < 1e-6 * np.abs(full.displacement).max() + 1e-12
+    assert diff > 0.0  # not the same bits: the saved acceleration is what makes a resume exact
+    # ... and still the same motion: the scheme's a1 and M^-1 f(x1) differ by Newton's residual
+    # (rtol = 1e-8 of the step's force scale), which moves the next steps by about that fraction
+    # of the displacement; 100 x rtol leaves room for the few steps it propagates over
+    assert diff < 1e-6 * np.abs(full.displacement).max()
 
 
 def test_finished_checkpoint_returns_the_run_without_stepping(tmp_path):
