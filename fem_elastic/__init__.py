@@ -1,6 +1,6 @@
 """fem_elastic: elastic solids with the finite element method, built on scikit-fem.
 
-The public surface (see ``DESIGN.md``)::
+The public surface::
 
     import fem_elastic as fe
     mesh = fe.beam_mesh(length=1.0, width=0.1, height=0.1, cells=(20, 2, 2))
@@ -9,27 +9,54 @@ The public surface (see ``DESIGN.md``)::
                      fixed="left", gravity=(0.0, 0.0, -9.81))
     static = fe.solve_static(model)
 
+The package is grouped by layer; each imports only those below it
+(``docs/architecture.md``, and a test keeps it so):
+
+- :mod:`fem_elastic.errors`, :mod:`fem_elastic.files`: typed errors, atomic files;
+- :mod:`fem_elastic.geometry` (meshes) and :mod:`fem_elastic.materials` (``psi(F)``);
+- :mod:`fem_elastic.discretization`: the scikit-fem adapter, kernels, mass;
+- :mod:`fem_elastic.physics`: every Potential and the Model;
+- :mod:`fem_elastic.solvers`: Newton, linear solvers, statics, modal analysis;
+- :mod:`fem_elastic.dynamics`: State, integrators, ``simulate``, checkpoints;
+- :mod:`fem_elastic.study`: error-vs-run-time and stability studies (imported on first use);
+- :mod:`fem_elastic.app`: scene files, runner, output, render, the command line.
+
 ``import fem_elastic`` needs only numpy, scipy and scikit-fem: meshio is
-imported inside the I/O functions, pyamg inside the AMG solver.
+imported inside the I/O functions, pyamg inside the AMG solver, and the
+studies on first use of ``fe.study``.
 """
 
-from . import study
-from .analytic import RectangularCantilever, elastica_tip
-from .checkpoint import Checkpoint, load_checkpoint
-from .contact import Box, Ground, Obstacle, Sphere
-from .damping import Rayleigh
-from .driven import Motion, Prescribed, Translate, Twist
-from .elastic_body import ElasticBody, ElasticPotential
-from .integrators import (
+from . import _compat
+from .app import (
+    BuiltRun,
+    Scene,
+    SceneError,
+    SeriesData,
+    SeriesWriter,
+    load_scene,
+    parse_scene,
+    read_series,
+    scene_help,
+    write_pvd,
+    write_summary,
+    write_vtu_frame,
+)
+from .dynamics import (
     RK4,
+    Checkpoint,
     ExplicitEuler,
     ImplicitEuler,
     Integrator,
     LinearizedImplicitEuler,
     Midpoint,
     Newmark,
+    StabilityWarning,
+    State,
     StepStats,
     SymplecticEuler,
+    Trajectory,
+    load_checkpoint,
+    simulate,
 )
 from .errors import (
     Diverged,
@@ -39,9 +66,17 @@ from .errors import (
     NotConverged,
     UnderConstrained,
 )
-from .fields import CellFields, cell_fields, von_mises
-from .io import SeriesData, load_mesh, read_series, save_mesh, write_pvd, write_vtu_frame
-from .linear_solvers import AMGSolver, AutoSolver, DirectSolver, LinearSolverFailed, SingularMatrix
+from .geometry import (
+    beam_mesh,
+    load_mesh,
+    mesh_from_arrays,
+    mesh_quality,
+    remove_unused_vertices,
+    reorient,
+    save_mesh,
+    signed_volumes,
+    validate_mesh,
+)
 from .materials import (
     Corotated,
     LinearElastic,
@@ -51,26 +86,44 @@ from .materials import (
     StVK,
     lame_parameters,
 )
-from .modal import critical_time_step, max_frequency, natural_frequencies
-from .mesh import (
-    beam_mesh,
-    mesh_from_arrays,
-    mesh_quality,
-    remove_unused_vertices,
-    reorient,
-    signed_volumes,
-    validate_mesh,
+from .physics import (
+    Box,
+    CellFields,
+    ElasticBody,
+    ElasticPotential,
+    Ground,
+    LinearPotential,
+    MassSpring,
+    Model,
+    Motion,
+    Obstacle,
+    Potential,
+    Prescribed,
+    Rayleigh,
+    RectangularCantilever,
+    Sphere,
+    SpringPotential,
+    Translate,
+    Twist,
+    WarpedStiffness,
+    cell_fields,
+    elastica_tip,
+    lloyd_stiffness,
+    van_gelder_stiffness,
+    von_mises,
 )
-from .model import Model
-from .output import SeriesWriter, write_summary
-from .potential import LinearPotential, Potential
-from .scene import BuiltRun, Scene, SceneError, load_scene, parse_scene, scene_help
-from .simulate import StabilityWarning, simulate
-from .springs import MassSpring, SpringPotential, lloyd_stiffness, van_gelder_stiffness
-from .state import State
-from .stiffness_warping import WarpedStiffness
-from .static import StaticResult, solve_static
-from .trajectory import Trajectory
+from .solvers import (
+    AMGSolver,
+    AutoSolver,
+    DirectSolver,
+    LinearSolverFailed,
+    SingularMatrix,
+    StaticResult,
+    critical_time_step,
+    max_frequency,
+    natural_frequencies,
+    solve_static,
+)
 
 __version__ = "0.1.0"
 
@@ -95,3 +148,16 @@ __all__ = [
     "mesh_quality", "remove_unused_vertices", "reorient", "save_mesh", "signed_volumes",
     "solve_static", "validate_mesh",
 ]
+
+_compat.install()
+
+
+def __getattr__(name: str):
+    # fe.study is imported on first use: it pulls in the runner's and the studies' code
+    if name == "study":
+        import importlib
+
+        return importlib.import_module(".study", __name__)
+    if name in _compat.MOVED:  # fe.mesh, fe.analytic, ...: the modules' old places
+        return _compat.moved_module(name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

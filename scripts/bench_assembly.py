@@ -8,7 +8,7 @@ Times, in one run and on one mesh (default: a 1 x 0.1 x 0.1 m beam of 100 x 16 x
    matrices, scatter into the fixed CSR pattern);
 2. the same residual + tangent with scikit-fem's generic form assembly, written as in its
    hyperelastic example (``docs/examples/ex43.py``, see
-   :func:`fem_elastic.skfem_forms.neohookean_forms_ex43`);
+   :func:`fem_elastic.discretization.skfem_forms.neohookean_forms_ex43`);
 3. one Newton iteration's linear solve on the projected matrix with the supports applied:
    sparse LU (``fe.DirectSolver``, once: 10-25 s and ~3 GB at full size) and AMG-CG
    (``fe.AMGSolver`` with the rigid-body modes), and the share of assembly in a full
@@ -72,8 +72,8 @@ def run(cells, repeats, skfem_repeats, direct):
     import fem_elastic as fe
     from fem_elastic.materials.isotropic import is_psd_3x3
     from fem_elastic.materials.svd import signed_svd
-    from fem_elastic.newton import constrain
-    from fem_elastic.skfem_forms import neohookean_forms_ex43
+    from fem_elastic.solvers.newton import constrain
+    from fem_elastic.discretization.skfem_forms import neohookean_forms_ex43
 
     mesh = fe.beam_mesh(1.0, 0.1, 0.1, cells)
     material = fe.NeoHookean(E=1.0e7, nu=0.45)

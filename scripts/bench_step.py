@@ -6,7 +6,7 @@ Times, in one run and on one mesh (default: a 1 x 0.1 x 0.1 m beam of 100 x 16 x
 
 1. ``ElasticPotential.gradient`` (the elastic force with its sign flipped) on the numpy path
    (``FEM_ELASTIC_NUMBA=0``: F, P and the force contraction as whole-mesh arrays) and on the
-   fused path (:mod:`fem_elastic.fused`: one pass over the elements);
+   fused path (:mod:`fem_elastic.discretization.fused`: one pass over the elements);
 2. ``ElasticPotential.energy`` on both paths (a line search calls it many times);
 3. one symplectic Euler step written out by hand on the fused path,
    ``v += dt (-g) / m`` on the free DOFs, then ``x += dt v``, and its cost in gradients;
@@ -150,7 +150,7 @@ def run(cells, repeats):
     import scipy
 
     import fem_elastic as fe
-    from fem_elastic import fused
+    from fem_elastic.discretization import fused
 
     mesh = fe.beam_mesh(1.0, 0.1, 0.1, cells)
     material = fe.NeoHookean(E=1.0e7, nu=0.45)

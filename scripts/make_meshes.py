@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 from skfem import MeshTet
 
-from fem_elastic.io import save_mesh
-from fem_elastic.mesh import beam_mesh, mesh_quality, reorient, validate_mesh
+from fem_elastic.geometry.mesh_io import save_mesh
+from fem_elastic.geometry.mesh import beam_mesh, mesh_quality, reorient, validate_mesh
 
 MESHES = Path(__file__).resolve().parent.parent / "meshes"
 

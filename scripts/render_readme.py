@@ -1,9 +1,9 @@
 """Render the README's picture: the demo's FEM beam beside its mass-spring copy.
 
-Runs the packaged demo scene (``fem_elastic/scenes/demo.toml``: a Neo-Hookean
+Runs the packaged demo scene (``fem_elastic/app/scenes/demo.toml``: a Neo-Hookean
 cantilever on quadratic tets and a spring network on the same mesh, released
 under gravity) without rendering its movie, then draws one PNG with
-:func:`fem_elastic.render.render_frame`: two columns (FEM, springs) and two
+:func:`fem_elastic.app.render.render_frame`: two columns (FEM, springs) and two
 rows (mid-run and the last frame), coloured by von Mises stress, with the
 colour range and camera of the whole run. Prints what it wrote and the
 timings. About 30 s on a 2-core machine.
@@ -25,13 +25,13 @@ from pathlib import Path
 
 import fem_elastic
 
-DEMO = Path(fem_elastic.__file__).resolve().parent / "scenes" / "demo.toml"
+DEMO = Path(fem_elastic.__file__).resolve().parent / "app" / "scenes" / "demo.toml"
 
 
 def run_demo(work: Path, duration: float | None) -> tuple[list[Path], float]:
     """Simulate the demo's variants into ``work``; the run directories and the seconds taken."""
-    from fem_elastic.runner import run_scene
-    from fem_elastic.scene import load_scene
+    from fem_elastic.app.runner import run_scene
+    from fem_elastic.app.scene import load_scene
 
     scene = load_scene(DEMO)
     if duration is not None:
@@ -63,8 +63,8 @@ def main(argv=None) -> int:
                              "(quick checks)")
     args = parser.parse_args(argv)
 
-    from fem_elastic.io import read_series
-    from fem_elastic.render import render_frame
+    from fem_elastic.app.vtu import read_series
+    from fem_elastic.app.render import render_frame
 
     t_start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="render_readme_") as tmp:

@@ -18,7 +18,7 @@ import pytest
 
 import fem_elastic as fe
 from bad_inputs import BAD_INPUTS, END_MARKER, START_MARKER, markdown_table
-from fem_elastic.cli import main
+from fem_elastic.app.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -27,8 +27,8 @@ import numpy as np
 import pytest
 
 import fem_elastic as fe
-from fem_elastic.analytic import elastica_tip as elastica
-from fem_elastic.loads import traction_load
+from fem_elastic.physics.analytic import elastica_tip as elastica
+from fem_elastic.physics.loads import traction_load
 
 E, NU, RHO, G = 1e9, 0.3, 1000.0, 9.81
 L = 1.0

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import fem_elastic as fe
-from fem_elastic.checkpoint import CHECKPOINT_NAME, FRAMES_NAME, STEPS_NAME
+from fem_elastic.dynamics.checkpoint import CHECKPOINT_NAME, FRAMES_NAME, STEPS_NAME
 
 ARRAYS = ("times", "displacement", "velocity", "kinetic", "potential", "total", "linear_momentum",
           "angular_momentum")

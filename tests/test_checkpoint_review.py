@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 
 import fem_elastic as fe
-import fem_elastic.checkpoint as ckmod
-from fem_elastic import cli
-from fem_elastic.io import read_series
-from fem_elastic.output import SeriesWriter
-from fem_elastic.runner import resume_scene, run_scene
+import fem_elastic.dynamics.checkpoint as ckmod
+from fem_elastic.app import cli
+from fem_elastic.app.vtu import read_series
+from fem_elastic.app.output import SeriesWriter
+from fem_elastic.app.runner import resume_scene, run_scene
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_checkpoint import _beam, _StopAt, assert_same_run  # noqa: E402

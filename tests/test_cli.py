@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import fem_elastic as fe
-from fem_elastic.io import read_series
+from fem_elastic.app.vtu import read_series
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -64,7 +64,7 @@ body = { type = "springs", E = 1e5, nu = 0.25, density = 1000.0 }
 def run(*args, timeout=300, **kwargs):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     return subprocess.run(
-        [sys.executable, "-m", "fem_elastic.cli", *map(str, args)],
+        [sys.executable, "-m", "fem_elastic.app.cli", *map(str, args)],
         capture_output=True, text=True, timeout=timeout, env=env, **kwargs,
     )
 
@@ -257,7 +257,7 @@ def test_sigint_leaves_readable_files_and_a_clear_message(tmp_path):
     # A background job of a non-interactive shell (CI runners, `cmd &`) inherits SIGINT ignored,
     # and Python then leaves it ignored: give the child the default disposition, as a terminal would.
     proc = subprocess.Popen(
-        [sys.executable, "-m", "fem_elastic.cli", "run", str(scene), "--out", str(out), "--quiet"],
+        [sys.executable, "-m", "fem_elastic.app.cli", "run", str(scene), "--out", str(out), "--quiet"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )

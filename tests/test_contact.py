@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import fem_elastic as fe
-from fem_elastic.contact import (
+from fem_elastic.physics.contact import (
     BarrierContact,
     Box,
     Ground,
@@ -15,7 +15,7 @@ from fem_elastic.contact import (
 )
 from fem_elastic.discretization import Discretization
 from fem_elastic.errors import InvalidParameter
-from fem_elastic.newton import newton_minimize
+from fem_elastic.solvers.newton import newton_minimize
 
 G = 9.81  # m/s^2, the default design gravity of the contact stiffness
 DHAT = 0.1  # m, barrier activation distance in the derivative tests (geometry is O(1) m)

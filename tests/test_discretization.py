@@ -7,7 +7,7 @@ import skfem
 
 import fem_elastic as fe
 from fem_elastic.discretization import Discretization
-from fem_elastic.elastic_body import ElasticPotential
+from fem_elastic.physics.elastic_body import ElasticPotential
 
 ORDERS = [1, 2]
 

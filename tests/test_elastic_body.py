@@ -1,4 +1,4 @@
-"""Tests of fem_elastic.elastic_body: the vectorized kernel against plain scikit-fem forms,
+"""Tests of fem_elastic.physics.elastic_body: the vectorized kernel against plain scikit-fem forms,
 finite differences, PSD projection, admissibility, the CSR pattern and invariance.
 
 Every test runs on a small distorted mesh (12 tets of a 2x1x1 box whose vertices are moved
@@ -14,8 +14,8 @@ import skfem
 
 import fem_elastic as fe
 from fem_elastic.discretization import Discretization
-from fem_elastic.elastic_body import ElasticPotential
-from fem_elastic.skfem_forms import assemble_reference
+from fem_elastic.physics.elastic_body import ElasticPotential
+from fem_elastic.discretization.skfem_forms import assemble_reference
 
 E, NU = 1.0e6, 0.4  # rubber-like; mu = 3.6e5 Pa, lam = 1.4e6 Pa
 MATERIALS = [fe.LinearElastic, fe.StVK, fe.NeoHookean, fe.StableNeoHookean, fe.Corotated]

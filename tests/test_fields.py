@@ -1,4 +1,4 @@
-"""Tests of fem_elastic.fields: per-tet von Mises stress and strain-energy density.
+"""Tests of fem_elastic.physics.fields: per-tet von Mises stress and strain-energy density.
 
 Closed forms (homogeneous stretches), invariants (energy sums, the spring
 network's virial against the force through a section, frame indifference)
@@ -12,7 +12,7 @@ import pytest
 
 import fem_elastic as fe
 from fem_elastic.errors import InvalidParameter
-from fem_elastic.fields import CellFields, cell_fields, von_mises
+from fem_elastic.physics.fields import CellFields, cell_fields, von_mises
 
 E, NU = 1.0e6, 0.3
 

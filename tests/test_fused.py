@@ -1,4 +1,4 @@
-"""Tests of fem_elastic.fused: the fused numba P1 kernels against the numpy path.
+"""Tests of fem_elastic.discretization.fused: the fused numba P1 kernels against the numpy path.
 
 Both paths of ``ElasticPotential.energy`` / ``.gradient`` run on a small distorted P1 mesh
 at random deformations, and must agree to round-off for every registered material; the
@@ -16,9 +16,9 @@ import pytest
 import skfem
 
 import fem_elastic as fe
-from fem_elastic import fused
+from fem_elastic.discretization import fused
 from fem_elastic.discretization import Discretization
-from fem_elastic.elastic_body import ElasticPotential
+from fem_elastic.physics.elastic_body import ElasticPotential
 
 E, NU = 1.0e6, 0.4
 REGISTERED = [fe.LinearElastic, fe.StVK, fe.NeoHookean, fe.StableNeoHookean]
@@ -299,7 +299,7 @@ def test_polar_rotation_kernel_special_matrices():
 
 
 def _warped(sp):
-    from fem_elastic.stiffness_warping import WarpedStiffness
+    from fem_elastic.physics.stiffness_warping import WarpedStiffness
 
     return WarpedStiffness(sp, fe.Corotated(E, NU))
 

@@ -36,8 +36,8 @@ except ModuleNotFoundError:  # pragma: no cover - Python < 3.11
     import tomli as tomllib
 
 import fem_elastic as fe
-from fem_elastic.cli import main
-from fem_elastic.scene_schema import SCENE_FILE, Table, TableArray
+from fem_elastic.app.cli import main
+from fem_elastic.app.scene_schema import SCENE_FILE, Table, TableArray
 
 SETTINGS = dict(deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much,

@@ -1,4 +1,4 @@
-"""Tests of fem_elastic.io: load/save round trips and file errors."""
+"""Tests of fem_elastic.geometry.mesh_io: load/save round trips and file errors."""
 
 import logging
 import os
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from fem_elastic.errors import InvalidMesh, InvalidParameter
-from fem_elastic.io import load_mesh, save_mesh
-from fem_elastic.mesh import beam_mesh, signed_volumes, validate_mesh
+from fem_elastic.geometry.mesh_io import load_mesh, save_mesh
+from fem_elastic.geometry.mesh import beam_mesh, signed_volumes, validate_mesh
 
 MESHES = Path(__file__).resolve().parent.parent / "meshes"
 
@@ -165,7 +165,7 @@ def test_tetra10_is_linearized_and_gmsh_groups_become_boundaries(tmp_path, caplo
     )
     path = tmp_path / "quadratic.msh"
     meshio.write(path, mio, file_format="gmsh22", binary=False)
-    with caplog.at_level(logging.INFO, logger="fem_elastic.io"):
+    with caplog.at_level(logging.INFO, logger="fem_elastic.geometry.mesh_io"):
         back = load_mesh(path)
     assert "linearized" in caplog.text
     np.testing.assert_array_equal(back.p, mesh.p)  # mid-edge nodes dropped, corners kept in order
@@ -193,7 +193,7 @@ def test_shipped_meshes_load_and_validate(name, n_tets):
 
 def _write_tiny_series(run, n_frames=3):
     """A 2-tet series with known arrays; returns (times, points_ref, tets, displacements)."""
-    from fem_elastic.io import write_pvd, write_vtu_frame
+    from fem_elastic.app.vtu import write_pvd, write_vtu_frame
 
     mesh = beam_mesh(cells=(1, 1, 1))
     ref, tets = mesh.p.T, mesh.t.T
@@ -214,7 +214,7 @@ def _write_tiny_series(run, n_frames=3):
 
 
 def test_series_round_trip(tmp_path):
-    from fem_elastic.io import read_series
+    from fem_elastic.app.vtu import read_series
 
     times, ref, tets, disps = _write_tiny_series(tmp_path)
     series = read_series(tmp_path)
@@ -236,13 +236,13 @@ def test_series_round_trip(tmp_path):
 
 
 def test_series_skips_missing_and_truncated_frames(tmp_path, caplog):
-    from fem_elastic.io import read_series
+    from fem_elastic.app.vtu import read_series
 
     times, _, _, disps = _write_tiny_series(tmp_path)
     (tmp_path / "frames/frame_000001.vtu").unlink()
     truncated = tmp_path / "frames/frame_000002.vtu"
     truncated.write_bytes(truncated.read_bytes()[:200])
-    with caplog.at_level(logging.WARNING, logger="fem_elastic.io"):
+    with caplog.at_level(logging.WARNING, logger="fem_elastic.app.vtu"):
         series = read_series(tmp_path)
     np.testing.assert_array_equal(series.times, times[:1])
     np.testing.assert_array_equal(series.displacement, disps[:1])
@@ -251,7 +251,7 @@ def test_series_skips_missing_and_truncated_frames(tmp_path, caplog):
 
 
 def test_read_series_without_pvd(tmp_path):
-    from fem_elastic.io import read_series
+    from fem_elastic.app.vtu import read_series
 
     with pytest.raises(InvalidParameter, match="series.pvd"):
         read_series(tmp_path)

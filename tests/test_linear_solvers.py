@@ -5,7 +5,7 @@ import pytest
 import scipy.sparse as sp
 
 import fem_elastic as fe
-from fem_elastic.newton import constrain
+from fem_elastic.solvers.newton import constrain
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +66,7 @@ def test_strict_auto_solver_reraises(system):
 
 
 def test_direct_solver_reuses_the_factor_of_an_identical_matrix_only():
-    from fem_elastic import linear_solvers
+    from fem_elastic.solvers import linear_solvers
 
     rng = np.random.default_rng(7)
     n = 40

@@ -5,7 +5,7 @@ import pytest
 
 import fem_elastic as fe
 from fem_elastic.discretization import Discretization
-from fem_elastic.loads import gravity_load, traction_load
+from fem_elastic.physics.loads import gravity_load, traction_load
 
 L, W, H = 1.0, 0.2, 0.1
 

@@ -5,7 +5,7 @@ import pytest
 
 import fem_elastic as fe
 from fem_elastic.discretization import Discretization
-from fem_elastic.mass import consistent_mass, lumped_mass
+from fem_elastic.discretization.mass import consistent_mass, lumped_mass
 
 
 @pytest.mark.parametrize("order", [1, 2])

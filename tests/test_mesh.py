@@ -1,11 +1,11 @@
-"""Tests of fem_elastic.mesh: beam construction, validation and repair."""
+"""Tests of fem_elastic.geometry.mesh: beam construction, validation and repair."""
 
 import numpy as np
 import pytest
 from skfem import MeshHex, MeshTet, MeshTri
 
 from fem_elastic.errors import InvalidMesh, InvalidParameter
-from fem_elastic.mesh import (
+from fem_elastic.geometry.mesh import (
     beam_mesh,
     boundary_facets,
     mesh_from_arrays,

@@ -1,4 +1,4 @@
-"""Tests of fem_elastic.modal: a cantilever's first bending frequency against Euler-Bernoulli,
+"""Tests of fem_elastic.solvers.modal: a cantilever's first bending frequency against Euler-Bernoulli,
 the rigid modes of a free body, the sqrt(E / rho) scaling, omega_max against a dense
 generalized eigensolver, Rayleigh-Ritz monotonicity of the consistent-mass frequencies, and
 the critical time step of explicit schemes against closed forms.
@@ -17,7 +17,7 @@ import pytest
 import scipy.linalg as sla
 
 import fem_elastic as fe
-from fem_elastic.modal import (
+from fem_elastic.solvers.modal import (
     critical_time_step,
     max_frequency,
     modal_critical_time_step,
@@ -333,7 +333,7 @@ def test_critical_step_counts_the_dashpots_of_a_spring_body():
 
 
 def test_critical_step_refuses_a_class_and_bad_damping_ratios():
-    from fem_elastic.modal import modal_critical_time_step
+    from fem_elastic.solvers.modal import modal_critical_time_step
 
     model = fe.Model(fe.beam_mesh(cells=(2, 1, 1)), density=1000.0,
                      body=fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3)), fixed="left")

@@ -1,4 +1,4 @@
-"""Tests of fem_elastic.output: the VTU series a run writes, read back and checked
+"""Tests of fem_elastic.app.output: the VTU series a run writes, read back and checked
 against what fe.simulate returned, and its behaviour when a write fails midway."""
 
 import json
@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 import fem_elastic as fe
-import fem_elastic.io as fio
+import fem_elastic.files as fio
 from fem_elastic.errors import InvalidParameter
-from fem_elastic.fields import cell_fields
-from fem_elastic.io import read_series
-from fem_elastic.output import SeriesWriter, to_json, write_summary
+from fem_elastic.physics.fields import cell_fields
+from fem_elastic.app.vtu import read_series
+from fem_elastic.app.output import SeriesWriter, to_json, write_summary
 
 BODIES = {
     "NeoHookean-P1": lambda: fe.ElasticBody(fe.NeoHookean(E=1e5, nu=0.3)),
@@ -162,7 +162,7 @@ def test_deleted_frame_is_skipped_with_a_warning(tmp_path, caplog):
     model = _model()
     writer, run = _run(model, tmp_path, steps=3, every=1, give_n_steps=True)
     (tmp_path / "frames" / "frame_000001.vtu").unlink()
-    with caplog.at_level(logging.WARNING, logger="fem_elastic.io"):
+    with caplog.at_level(logging.WARNING, logger="fem_elastic.app.vtu"):
         series = read_series(tmp_path)
     np.testing.assert_array_equal(series.times, run.times[[0, 2, 3]])
     np.testing.assert_allclose(series.displacement, run.displacement[[0, 2, 3]], rtol=0, atol=1e-12)

@@ -1,4 +1,4 @@
-"""Off-screen rendering of run directories (fem_elastic.render)."""
+"""Off-screen rendering of run directories (fem_elastic.app.render)."""
 
 import json
 import os
@@ -14,8 +14,9 @@ import fem_elastic as fe
 pv = pytest.importorskip("pyvista")
 iio = pytest.importorskip("imageio.v3")
 
-from fem_elastic import render  # noqa: E402  (after the skip: pyvista is optional)
-from fem_elastic.io import write_pvd, write_vtu_frame  # noqa: E402
+from fem_elastic.app import render  # noqa: E402  (after the skip: pyvista is optional)
+from fem_elastic.app.vtu import write_pvd
+from fem_elastic.app.vtu import write_vtu_frame  # noqa: E402
 
 SIZE = (160, 120)  # small pictures keep the tests fast; 160 x 120 still shows the beam
 
@@ -62,7 +63,7 @@ def simulated(tmp_path_factory):
     Five frames (t = 0, 0.1, ..., 0.4 s); the tip falls about 0.5 m, so the
     stress runs from 0 at the tip to its largest at the clamp.
     """
-    from fem_elastic.output import SeriesWriter
+    from fem_elastic.app.output import SeriesWriter
 
     root = tmp_path_factory.mktemp("simulated")
     mesh = fe.beam_mesh(length=1.0, width=0.1, height=0.1, cells=(4, 1, 1))

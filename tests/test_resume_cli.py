@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fem_elastic import cli
-from fem_elastic.io import read_series
-from fem_elastic.output import SeriesWriter
+from fem_elastic.app import cli
+from fem_elastic.app.vtu import read_series
+from fem_elastic.app.output import SeriesWriter
 
 from test_cli import TINY, clean_error, run
 
@@ -110,7 +110,7 @@ def test_kill_9_then_resume(tmp_path):
     scene = _scene(tmp_path, **{"duration = 0.2": "duration = 1.5", "every = 2": "every = 3\ncheckpoint_every = 4"})
     a, b = tmp_path / "a", tmp_path / "b"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "fem_elastic.cli", "run", str(scene), "--out", str(b), "--quiet",
+        [sys.executable, "-m", "fem_elastic.app.cli", "run", str(scene), "--out", str(b), "--quiet",
          "--variant", "fem"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     ck = b / "fem" / "checkpoint" / "checkpoint.npz"
@@ -198,7 +198,7 @@ def test_the_fingerprint_is_the_same_in_another_process():
     """Nothing process-specific (an address in a repr) may enter it: a resume would be refused."""
     code = (
         "import json, fem_elastic as fe\n"
-        "from fem_elastic.checkpoint import run_fingerprint\n"
+        "from fem_elastic.dynamics.checkpoint import run_fingerprint\n"
         "m = fe.Model(fe.beam_mesh(cells=(2, 1, 1)), density=1000.0, body=fe.MassSpring(E=1e5, nu=0.25),\n"
         "             fixed='left', ground=fe.Ground(z=-1.0), damping=fe.Rayleigh(0.1, 0.0),\n"
         "             driven={'right': fe.Twist(0.5, duration=0.1)})\n"

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import fem_elastic as fe
-from fem_elastic.scene import BuiltRun, Scene, SceneError, load_scene, parse_scene, scene_help
-from fem_elastic.scene_schema import SCENE_FILE, Table, TableArray
+from fem_elastic.app.scene import BuiltRun, Scene, SceneError, load_scene, parse_scene, scene_help
+from fem_elastic.app.scene_schema import SCENE_FILE, Table, TableArray
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -349,7 +349,7 @@ def test_missing_scene_file():
         load_scene("no/such/scene.toml")
 
 
-SHIPPED = sorted((ROOT / "scenes").glob("*.toml")) + sorted((ROOT / "fem_elastic" / "scenes").glob("*.toml"))
+SHIPPED = sorted((ROOT / "scenes").glob("*.toml")) + sorted((ROOT / "fem_elastic" / "app" / "scenes").glob("*.toml"))
 
 
 @pytest.mark.parametrize("path", SHIPPED, ids=[p.name for p in SHIPPED])
@@ -369,7 +369,7 @@ def test_shipped_scenes_exist():
 
 
 def test_demo_scene():
-    scene = load_scene(ROOT / "fem_elastic" / "scenes" / "demo.toml")
+    scene = load_scene(ROOT / "fem_elastic" / "app" / "scenes" / "demo.toml")
     assert scene.name == "demo" and scene.variants == ["fem", "springs"]
     spec = scene.spec
     assert spec["body"]["material"] == "neo_hookean" and spec["compare"][0]["body"]["nu"] == 0.25

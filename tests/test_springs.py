@@ -1,4 +1,4 @@
-"""Tests of fem_elastic.springs: derivatives by finite differences, the PSD projection, the
+"""Tests of fem_elastic.physics.springs: derivatives by finite differences, the PSD projection, the
 spring damper, a two-mass oscillator against its closed form, the calibrations' effective
 moduli against their derivation, linearity in E, the shared mass and parameter checks.
 
@@ -17,7 +17,7 @@ import skfem
 
 import fem_elastic as fe
 from fem_elastic.discretization import Discretization
-from fem_elastic.springs import (
+from fem_elastic.physics.springs import (
     SPRING_POISSON_RATIO,
     MassSpring,
     SpringPotential,
@@ -359,7 +359,7 @@ def test_lloyd_fit_is_the_frobenius_least_squares_fit():
 def test_lloyd_clamps_negative_constants_and_says_so(caplog):
     p = np.array([[0.0, 0, 0], [1.0, 0, 0], [0.5, 0.9, 0], [0.5, 0.3, 0.3]])  # a sliver
     mesh = fe.mesh_from_arrays(p, [[0, 1, 2, 3]])
-    with caplog.at_level(logging.WARNING, logger="fem_elastic.springs"):
+    with caplog.at_level(logging.WARNING, logger="fem_elastic.physics.springs"):
         k = lloyd_stiffness(mesh, E)
     assert (k >= 0).all() and np.sum(k == 0) == 2
     assert "2 of 6 fitted spring constants were negative" in caplog.text
@@ -425,13 +425,13 @@ def test_roundoff_floors_are_on_the_scale_of_the_fem_ones():
 
 def test_a_nu_springs_cannot_represent_is_reported(caplog):
     mesh = fe.beam_mesh(cells=(2, 1, 1))
-    with caplog.at_level(logging.WARNING, logger="fem_elastic.springs"):
+    with caplog.at_level(logging.WARNING, logger="fem_elastic.physics.springs"):
         fe.Model(mesh, 1000.0, body=MassSpring(E=E))  # nu = 1/4: nothing to say
     assert caplog.text == ""
     for calibration, says in ((van_gelder_stiffness, "ignores nu"),
                               (lloyd_stiffness, "target of its least-squares fit")):
         caplog.clear()
-        with caplog.at_level(logging.WARNING, logger="fem_elastic.springs"):
+        with caplog.at_level(logging.WARNING, logger="fem_elastic.physics.springs"):
             fe.Model(mesh, 1000.0, body=MassSpring(E=E, nu=0.45, calibration=calibration))
         assert "cannot represent nu = 0.45" in caplog.text and says in caplog.text
     assert "ignored" in MassSpring(E=E, nu=0.45).note
@@ -489,7 +489,7 @@ def test_van_gelder_network_is_anisotropic_as_documented():
 
     With van Gelder's constants the block's energy is a sum over tets (k l^2 = E sum V_t), so
     free surfaces do not enter and the values are the lattice's exact fractions (documented in
-    fem_elastic.springs): 30/29 along x, 10/7 along the shared diagonal (1, 1, 1), 5/6 along
+    fem_elastic.physics.springs): 30/29 along x, 10/7 along the shared diagonal (1, 1, 1), 5/6 along
     the face diagonal (1, 1, 0), 3/8 along (1, -1, 0). Tolerance: round-off of a 6x6 inverse.
     """
     space = Discretization(fe.beam_mesh(2.0, 1.0, 1.0, cells=(4, 2, 2)), 1)

@@ -1,4 +1,4 @@
-"""Tests of fem_elastic.static (and the Newton solver under it).
+"""Tests of fem_elastic.solvers.static (and the Newton solver under it).
 
 Physics checks: the patch test on a distorted mesh, homogeneous uniaxial stress
 against its closed form; solver checks: one Newton step for a linear material,
@@ -13,7 +13,7 @@ import pytest
 import scipy.sparse.linalg as spla
 
 import fem_elastic as fe
-from fem_elastic.newton import newton_minimize
+from fem_elastic.solvers.newton import newton_minimize
 
 E, NU = 1e9, 0.3
 
@@ -325,7 +325,7 @@ def test_amg_with_an_indefinite_exact_tangent_falls_back_to_the_projection(itera
                          traction={"right": (-2e6, 0.0, -1e3)})
         return fe.solve_static(model, linear_solver=solver)
 
-    with caplog.at_level("WARNING", logger="fem_elastic.linear_solvers"):
+    with caplog.at_level("WARNING", logger="fem_elastic.solvers.linear_solvers"):
         amg = solve(iterative)
     assert "Falling back to the direct solver" not in caplog.text
     direct = solve(fe.DirectSolver())

@@ -1,4 +1,4 @@
-"""Tests of fem_elastic.stiffness_warping: the warped force against the exact corotated
+"""Tests of fem_elastic.physics.stiffness_warping: the warped force against the exact corotated
 force (P1), rigid-motion invariance, the spectrum and symmetry of the warped matrix, its
 rest-state value, and its covariance under a rigid rotation of the whole body.
 
@@ -15,8 +15,8 @@ import skfem
 
 import fem_elastic as fe
 from fem_elastic.discretization import Discretization
-from fem_elastic.elastic_body import ElasticPotential
-from fem_elastic.stiffness_warping import WarpedStiffness
+from fem_elastic.physics.elastic_body import ElasticPotential
+from fem_elastic.physics.stiffness_warping import WarpedStiffness
 
 E, NU = 1.0e6, 0.4  # mu = 3.6e5 Pa, lam = 1.4e6 Pa
 ORDERS = [1, 2]

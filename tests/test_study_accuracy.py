@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import fem_elastic as fe
-from fem_elastic.loads import traction_load
+from fem_elastic.physics.loads import traction_load
 from fem_elastic.study.accuracy import (
     PROBLEMS,
     accuracy_cases,
@@ -135,7 +135,7 @@ def test_static_and_modal_errors_agree_with_direct_runs(study):
     nh = fe.ElasticBody(fe.NeoHookean(E=E, nu=nu), order=2)
     model = fe.Model(mesh, rho, nh, fixed="left", traction={"right": (0.0, 0.0, -P / (b * h))})
     res = fe.solve_static(model, linear_solver=fe.DirectSolver())
-    d, _ = fe.analytic.elastica_tip(alpha)
+    d, _ = fe.elastica_tip(alpha)
     err = -_tip(model, res.x) / (d * L) - 1.0
     row = _row(result, "large_deflection/neo_hookean/P2/10x1x1")
     assert row["rel_error"] == pytest.approx(err, rel=1e-9)  # the same Newton solve: round-off only

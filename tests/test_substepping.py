@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import fem_elastic as fe
-from fem_elastic.scene_schema import Boolean, Integer, Number, integrator_options, make_integrator, schema_help
+from fem_elastic.app.scene_schema import Boolean, Integer, Number, integrator_options, make_integrator, schema_help
 
 SE = fe.SymplecticEuler
 

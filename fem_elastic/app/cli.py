@@ -67,7 +67,7 @@ def _tip_vertices(mesh):
     """Vertex indices of the beam's free end: the vertices of its boundary "right" (x = L)."""
     import numpy as np
 
-    from .mesh import boundary_facets
+    from ..geometry.mesh import boundary_facets
 
     return np.unique(mesh.facets[:, boundary_facets(mesh, "right", what="The demo's tip")])
 
@@ -169,7 +169,7 @@ def _write_scene_summary(out_dir, scene, outcomes, rendered, seconds, status=Non
 
 
 def _run(args) -> int:
-    from .errors import InvalidParameter
+    from ..errors import InvalidParameter
     from .scene import load_scene
 
     out = _Out(args.quiet)
@@ -209,10 +209,10 @@ def _resume(args, out) -> int:
 def _demo(args) -> int:
     import numpy as np
 
-    from .analytic import RectangularCantilever
+    from ..physics.analytic import RectangularCantilever
     from .runner import SceneInterrupted, run_scene
     from .scene import load_scene
-    from .static import solve_static
+    from ..solvers.static import solve_static
 
     out = _Out(args.quiet)
     demo_path = Path(__file__).resolve().parent / "scenes" / "demo.toml"
@@ -273,7 +273,7 @@ def _demo(args) -> int:
 
 
 def _render(args) -> int:
-    from .errors import InvalidParameter
+    from ..errors import InvalidParameter
     from .render import render_runs
 
     out = _Out(args.quiet)
@@ -313,9 +313,9 @@ def _variant_order(out_dir: Path) -> list:
 def _info(args) -> int:
     import numpy as np
 
-    from .errors import FemElasticError
-    from .io import load_mesh
-    from .mesh import mesh_quality, validate_mesh
+    from ..errors import FemElasticError
+    from ..geometry.mesh_io import load_mesh
+    from ..geometry.mesh import mesh_quality, validate_mesh
 
     out = _Out(False)
     path = Path(args.mesh)
@@ -358,9 +358,9 @@ def _info(args) -> int:
 
 
 def _study(args) -> int:
-    from . import study
+    from .. import study
 
-    from .errors import InvalidParameter
+    from ..errors import InvalidParameter
 
     out = _Out(args.quiet)
     executor = "serial" if args.serial else None
@@ -541,7 +541,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     """Entry point of the ``fem-elastic`` command; returns the exit status."""
-    from .errors import FemElasticError
+    from ..errors import FemElasticError
 
     parser = _parser()
     args = parser.parse_args(argv)
@@ -556,7 +556,7 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except FemElasticError as exc:
-        from .errors import InvalidMesh, InvalidParameter
+        from ..errors import InvalidMesh, InvalidParameter
 
         sys.stderr.write(f"fem-elastic: error: {exc}\n")
         return _EXIT_USAGE if isinstance(exc, (InvalidParameter, InvalidMesh)) else _EXIT_FAILED

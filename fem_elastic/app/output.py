@@ -5,13 +5,13 @@ A run directory ``DIR`` holds
 - ``DIR/series.pvd``: the ParaView collection of every frame written, with its time (s);
 - ``DIR/frames/frame_%06d.vtu``: the mesh vertices at their DEFORMED positions and the
   (vertex) tets, with point data ``displacement`` (m) and ``velocity`` (m/s) and cell
-  data ``von_mises`` (Pa) and ``energy_density`` (J/m^3), see :mod:`fem_elastic.fields`;
+  data ``von_mises`` (Pa) and ``energy_density`` (J/m^3), see :mod:`fem_elastic.physics.fields`;
 - ``DIR/summary.json``: the run's figures, written when the run ends (completed,
   diverged or interrupted).
 
-Each file is written atomically (:mod:`fem_elastic.io`), and the PVD is rewritten after
+Each file is written atomically (:mod:`fem_elastic.files`), and the PVD is rewritten after
 every frame, so the directory is a readable series at any moment: a crash or Ctrl-C loses
-at most the frame being written. :func:`fem_elastic.io.read_series` reads it back.
+at most the frame being written. :func:`fem_elastic.app.vtu.read_series` reads it back.
 P2 bodies are written at their vertices (the same values ``fe.simulate`` records).
 """
 
@@ -26,9 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import Diverged, InvalidParameter
-from .fields import CellFields
-from .io import write_pvd, write_text_atomic, write_vtu_frame
+from ..dynamics.observers import Observer
+from ..errors import Diverged, InvalidParameter
+from ..physics.fields import CellFields
+from .vtu import write_pvd, write_vtu_frame
+from ..files import write_text_atomic
 
 __all__ = ["SeriesWriter", "write_summary", "to_json"]
 
@@ -124,7 +126,7 @@ def write_summary(path, summary: dict) -> Path:
 def remove_temporary_files(run_dir) -> None:
     """Remove what atomic writes cut short by a kill left in a run directory.
 
-    :func:`fem_elastic.io` writes each file to ``.NAME.XXXX.tmp`` beside it and
+    :func:`fem_elastic.files._atomic_write` writes each file to ``.NAME.XXXX.tmp`` beside it and
     renames it; only a process killed outright (no handler runs) leaves one.
     """
     run_dir = Path(run_dir)
@@ -144,7 +146,7 @@ def _field_range(values: np.ndarray) -> tuple[float | None, float | None]:
 
 def _ground_info(model):
     """``{"kind": "plane", "z": ..}`` for a model's ground plane, or None."""
-    from .contact import Ground
+    from ..physics.contact import Ground
 
     for obstacle in getattr(model, "obstacles", ()):
         if isinstance(obstacle, Ground):
@@ -154,11 +156,12 @@ def _ground_info(model):
     return None
 
 
-class SeriesWriter:
+class SeriesWriter(Observer):
     """Write a simulation to a run directory frame by frame (see the module notes).
 
-    Use it as ``fe.simulate``'s callback: write the initial state, let the
-    callback write every ``every``-th step, then :meth:`finish` with the
+    Use it as one of ``fe.simulate``'s observers (``observers=[writer]``; or
+    its callback, ``callback=writer.callback``): write the initial state, let
+    it write every ``every``-th step, then :meth:`finish` with the
     trajectory. With ``every`` equal to simulate's ``record_every`` the frames
     are exactly the Trajectory's. As a context manager, leaving the block on an
     exception finishes the run as ``"diverged"`` (:class:`fe.Diverged`) or
@@ -181,7 +184,7 @@ class SeriesWriter:
         Scene information copied into ``summary.json`` (e.g. ``name``,
         ``variant``, ``body``, ``ground``).
     compression : {"zlib", "lzma", None}
-        Of the VTU arrays (:func:`fem_elastic.io.write_vtu_frame`): None
+        Of the VTU arrays (:func:`fem_elastic.app.vtu.write_vtu_frame`): None
         writes ~7x faster and ~2x bigger files than zlib.
     resume_from : Checkpoint, optional
         Continue the series already in ``run_dir`` from this checkpoint of the
@@ -203,8 +206,8 @@ class SeriesWriter:
     --------
     >>> import tempfile
     >>> import fem_elastic as fe
-    >>> from fem_elastic.output import SeriesWriter
-    >>> from fem_elastic.io import read_series
+    >>> from fem_elastic.app.output import SeriesWriter
+    >>> from fem_elastic.app.vtu import read_series
     >>> model = fe.Model(fe.beam_mesh(cells=(2, 1, 1)), density=1000.0,
     ...                  body=fe.ElasticBody(fe.NeoHookean(E=1e5, nu=0.3)),
     ...                  fixed="left", gravity=(0, 0, -9.81))
@@ -213,7 +216,7 @@ class SeriesWriter:
     ...     state = fe.State.rest(model)
     ...     _ = writer.write_state(state)
     ...     run = fe.simulate(model, fe.ImplicitEuler(), dt=0.01, steps=5, state=state,
-    ...                       record_every=2, callback=writer.callback)
+    ...                       record_every=2, observers=[writer])
     ...     _ = writer.finish(run)
     ...     series = read_series(tmp)
     >>> series.times.round(2), series.summary["status"], series.summary["frames"]
@@ -340,6 +343,10 @@ class SeriesWriter:
             self._last_state = state
         self.seconds_output += time.perf_counter() - t0
         return path
+
+    def on_step(self, run, event) -> None:
+        """:class:`fem_elastic.dynamics.Observer` hook: :meth:`callback` with the step taken."""
+        self.callback(event.k, event.after)
 
     def callback(self, k: int, state) -> None:
         """``fe.simulate`` callback: write a frame after every ``every``-th step (and the last).

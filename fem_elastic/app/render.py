@@ -1,6 +1,6 @@
 """Off-screen pictures and movies of run directories, drawn with pyvista.
 
-A run directory (written by :class:`fem_elastic.output.SeriesWriter`) holds a
+A run directory (written by :class:`fem_elastic.app.output.SeriesWriter`) holds a
 VTU series of the deformed mesh. This module draws it without a display:
 the deformed surface coloured by von Mises stress (Pa) or displacement
 magnitude (m), a scalar bar with its unit, the ground plane when the run had
@@ -66,8 +66,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import FemElasticError, InvalidParameter
-from .io import _atomic_write
+from ..errors import FemElasticError, InvalidParameter
+from ..files import _atomic_write
 
 __all__ = ["render_runs", "render_frame", "color_range", "MissingDependency", "FORMATS", "FIELDS"]
 
@@ -248,7 +248,7 @@ def color_range(values, percentile: float = COLOR_PERCENTILE) -> tuple[float, fl
 
     Examples
     --------
-    >>> from fem_elastic.render import color_range
+    >>> from fem_elastic.app.render import color_range
     >>> color_range([[0.0, 1.0, 2.0, float("nan")], [3.0, float("inf")]], percentile=100)
     (0.0, 3.0)
     >>> color_range([[0.0, 0.0]])
@@ -335,13 +335,13 @@ def _load_runs(run_dirs, titles, color_by: str, every: int) -> list[_Run]:
 
 
 def _read_series(run_dir: Path):
-    """``fem_elastic.io.read_series``, after checking that ``run_dir`` is a directory."""
-    from .io import read_series
+    """``fem_elastic.app.vtu.read_series``, after checking that ``run_dir`` is a directory."""
+    from .vtu import read_series
 
     if not run_dir.is_dir():
         raise InvalidParameter(
             f"{str(run_dir)!r} is not a directory. Pass a run directory, one that "
-            "`fem-elastic run` or fem_elastic.output.SeriesWriter wrote (it holds series.pvd)."
+            "`fem-elastic run` or fem_elastic.app.output.SeriesWriter wrote (it holds series.pvd)."
         )
     if not (run_dir / "series.pvd").is_file():
         inside = sorted(p.parent.name for p in run_dir.glob("*/series.pvd"))
@@ -610,8 +610,8 @@ def render_runs(run_dirs, out, *, format: str = "mp4", size=(960, 540),
     ----------
     run_dirs : str, os.PathLike, SeriesData or sequence of them
         Run directories (each holds ``series.pvd``, see
-        :class:`fem_elastic.output.SeriesWriter`), or series already read with
-        :func:`fem_elastic.io.read_series`. Several runs are drawn side by side,
+        :class:`fem_elastic.app.output.SeriesWriter`), or series already read with
+        :func:`fem_elastic.app.vtu.read_series`. Several runs are drawn side by side,
         one viewport each, in the order given; they must share their frame
         times (a run that stopped early holds its last frame).
     out : str or os.PathLike
@@ -652,7 +652,7 @@ def render_runs(run_dirs, out, *, format: str = "mp4", size=(960, 540),
 
     Examples
     --------
-    >>> from fem_elastic.render import render_runs
+    >>> from fem_elastic.app.render import render_runs
     >>> render_runs(["out/fem", "out/springs"], "out/demo.mp4")  # doctest: +SKIP
     [PosixPath('out/demo.mp4')]
     """
@@ -779,7 +779,7 @@ def render_frame(run_dirs, path, *, frame=-1, size=(960, 540), color_by: str = "
 
     Examples
     --------
-    >>> from fem_elastic.render import render_frame
+    >>> from fem_elastic.app.render import render_frame
     >>> render_frame(["out/fem", "out/springs"], "docs/demo.png")  # doctest: +SKIP
     PosixPath('docs/demo.png')
     """

@@ -1,8 +1,8 @@
 """Running a scene: simulate each of its variants and write what it asks for.
 
-The glue between the scene layer (:mod:`fem_elastic.scene`), the time loop
-(:func:`fem_elastic.simulate`), the output series (:mod:`fem_elastic.output`)
-and the renderer (:mod:`fem_elastic.render`). An output directory holds one
+The glue between the scene layer (:mod:`fem_elastic.app.scene`), the time loop
+(:func:`fem_elastic.dynamics.simulate`), the output series (:mod:`fem_elastic.app.output`)
+and the renderer (:mod:`fem_elastic.app.render`). An output directory holds one
 run directory per variant (``OUT/<variant>/series.pvd``, ``frames/``,
 ``summary.json``), the movies and frames rendered from them side by side, and
 ``OUT/summary.json`` with every variant's figures.
@@ -10,7 +10,7 @@ run directory per variant (``OUT/<variant>/series.pvd``, ``frames/``,
 A run that diverges or is interrupted (Ctrl-C) still leaves every frame
 written so far readable and a ``summary.json`` that says how it ended.
 
-Each run directory also holds ``checkpoint/`` (:mod:`fem_elastic.checkpoint`):
+Each run directory also holds ``checkpoint/`` (:mod:`fem_elastic.dynamics.checkpoint`):
 written every ``[output] checkpoint_every`` steps, on Ctrl-C and at the end.
 The output directory keeps a copy of the scene (``scene.toml``) and how it was
 run (``run.json``), so ``fem-elastic run --resume OUT`` (:func:`resume_scene`)
@@ -27,7 +27,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import Diverged, InvalidParameter
+from ..errors import Diverged, InvalidParameter
 
 log = logging.getLogger(__name__)
 
@@ -122,9 +122,9 @@ def run_variant(run, out_dir, *, progress: bool = False, checkpoint_every: int |
     SceneInterrupted
         On Ctrl-C, after the frames so far, a checkpoint and ``summary.json`` are written.
     """
-    from .checkpoint import CHECKPOINT_NAME, load_checkpoint
+    from ..dynamics.checkpoint import CHECKPOINT_NAME, load_checkpoint
     from .output import SUMMARY_NAME, SeriesWriter, remove_temporary_files
-    from .simulate import simulate
+    from ..dynamics.simulate import simulate
 
     run_dir = Path(out_dir) / run.name
     ck_dir = run_dir / CHECKPOINT_DIR
@@ -137,7 +137,7 @@ def run_variant(run, out_dir, *, progress: bool = False, checkpoint_every: int |
                         record_every=run.record_every, checkpoint_dir=ck_dir, checkpoint_every=every,
                         resume=start)  # checks the checkpoint is this run's, returns its trajectory
         return RunOutcome(run.name, run_dir, "completed", traj.message, traj, 0.0, 0.0, run)
-    # n_steps: the callback writes the last frame, before simulate's final checkpoint
+    # n_steps: the writer writes the last frame, before simulate's final checkpoint
     writer = SeriesWriter(run.model, run_dir, every=run.record_every, n_steps=run.steps, info=run.info,
                           resume_from=start)
     t0 = time.perf_counter()
@@ -146,7 +146,7 @@ def run_variant(run, out_dir, *, progress: bool = False, checkpoint_every: int |
     try:
         traj = simulate(
             run.model, run.integrator, run.dt, steps=run.steps, state=run.state,
-            record_every=run.record_every, progress=progress, callback=writer.callback,
+            record_every=run.record_every, progress=progress, observers=[writer],
             checkpoint_dir=ck_dir, checkpoint_every=every, resume=start or False,
         )
     except Diverged as err:
@@ -280,7 +280,7 @@ def run_scene(scene, out_dir, *, variants=None, progress: bool = False, render: 
 
 def _record_run(out_dir: Path, scene, variants, render, checkpoint_every) -> None:
     """Keep the scene's text and how it was run in ``out_dir``, for ``--resume``."""
-    from .io import write_text_atomic
+    from ..files import write_text_atomic
 
     source = Path(scene.source)
     record = {

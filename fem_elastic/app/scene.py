@@ -5,7 +5,7 @@ damping, driven boundaries and an initial velocity, an integrator, a time step
 and duration, and what to write. :func:`load_scene` reads and checks one;
 :meth:`Scene.build` turns it into :class:`BuiltRun` objects (a
 :class:`fem_elastic.Model`, an integrator, ``dt``, the number of steps, the
-initial :class:`fem_elastic.State`) ready for :func:`fem_elastic.simulate`.
+initial :class:`fem_elastic.State`) ready for :func:`fem_elastic.dynamics.simulate`.
 A scene builds only the terms it declares: no gravity term without
 ``[loads] gravity``, no contact without ``[ground]``, no damping without
 ``[damping]``.
@@ -18,7 +18,7 @@ Every mistake in a file (TOML syntax, an unknown key, a wrong type, a missing
 key, a value out of range, a boundary the mesh does not have) raises
 :class:`SceneError`, which names the key, the file and the line, and suggests
 the near miss the user probably meant. The schema (tables, keys, types, units,
-defaults) lives in :mod:`fem_elastic.scene_schema`; :func:`scene_help` prints it.
+defaults) lives in :mod:`fem_elastic.app.scene_schema`; :func:`scene_help` prints it.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ try:
 except ModuleNotFoundError:  # pragma: no cover - Python < 3.11
     import tomli as tomllib
 
-from .errors import FemElasticError, InvalidParameter
+from ..errors import FemElasticError, InvalidParameter
 from .scene_schema import (
     CALIBRATIONS,
     MATERIALS,
@@ -97,7 +97,7 @@ class _KeyLines:
     """Line of every table header, key and array element of a TOML text.
 
     ``lines[path]`` with ``path`` a tuple of keys and array indices, as in
-    :class:`fem_elastic.scene_schema.Invalid`. Only run on text that tomllib
+    :class:`fem_elastic.app.scene_schema.Invalid`. Only run on text that tomllib
     has parsed, so the scanner can trust the syntax.
     """
 
@@ -307,7 +307,7 @@ def parse_scene(text: str, *, source: str = "<string>", base_dir=".") -> "Scene"
 
     Examples
     --------
-    >>> from fem_elastic.scene import SceneError, parse_scene
+    >>> from fem_elastic.app.scene import SceneError, parse_scene
     >>> scene = parse_scene('''
     ... [mesh]
     ... kind = "beam"
@@ -431,7 +431,7 @@ def scene_help() -> str:
 
 @dataclass(frozen=True)
 class BuiltRun:
-    """One run of a scene, ready for :func:`fem_elastic.simulate`.
+    """One run of a scene, ready for :func:`fem_elastic.dynamics.simulate`.
 
     Attributes
     ----------
@@ -467,12 +467,12 @@ class BuiltRun:
     info: dict
 
     def simulate(self, **options):
-        """Run it through :func:`fem_elastic.simulate`.
+        """Run it through :func:`fem_elastic.dynamics.simulate`.
 
         Parameters
         ----------
         **options
-            Passed on to :func:`fem_elastic.simulate` (``progress``,
+            Passed on to :func:`fem_elastic.dynamics.simulate` (``progress``,
             ``callback``, ``check_stability``, ...); the model, integrator,
             ``dt`` are this run's; ``steps`` (or ``t_end``), ``state`` and
             ``record_every`` default to this run's and may be overridden.
@@ -481,7 +481,7 @@ class BuiltRun:
         -------
         Trajectory
         """
-        from .simulate import simulate
+        from ..dynamics.simulate import simulate
 
         settings = {"steps": self.steps, "state": self.state, "record_every": self.record_every}
         if "t_end" in options:  # an end time replaces the scene's step count
@@ -588,7 +588,7 @@ class Scene:
 
     def _mesh(self):
         m = self.spec["mesh"]
-        from .mesh import beam_mesh
+        from ..geometry.mesh import beam_mesh
 
         if m["kind"] == "beam":
             mesh = self._guard(("mesh",), beam_mesh, m["length"], m["width"], m["height"], tuple(m["cells"]))
@@ -600,7 +600,7 @@ class Scene:
             if not full.is_file():
                 raise self._error(("mesh", "path"), f'mesh file "{m["path"]}" not found (looked for '
                                   f"{full}; the path is relative to the scene file's folder).")
-            from .io import load_mesh
+            from ..geometry.mesh_io import load_mesh
 
             try:
                 mesh = load_mesh(full, reorient=m["reorient"])
@@ -616,8 +616,8 @@ class Scene:
         return mesh, info
 
     def _steps(self) -> int:
-        """``ceil(duration / dt)``, checked against what :func:`fem_elastic.simulate` runs."""
-        from .simulate import MAX_STEPS
+        """``ceil(duration / dt)``, checked against what :func:`fem_elastic.dynamics.simulate` runs."""
+        from ..dynamics.simulate import MAX_STEPS
 
         dt, duration = self.spec["time"]["dt"], self.spec["time"]["duration"]
         ratio = duration / dt  # both finite and > 0 (the schema): inf only by overflow
@@ -669,20 +669,20 @@ class Scene:
 
     def _body(self, body: dict, path: tuple):
         if body["type"] == "fem":
-            from .elastic_body import ElasticBody
+            from ..physics.elastic_body import ElasticBody
 
             material = self._guard(path, MATERIALS[body["material"]], E=body["E"], nu=body["nu"])
             return self._guard(path + ("order",), ElasticBody, material, order=body["order"])
-        from .springs import MassSpring
+        from ..physics.springs import MassSpring
 
         return self._guard(path, MassSpring, E=body["E"], nu=body["nu"],
                            calibration=CALIBRATIONS[body["calibration"]], k_d=body["k_d"])
 
     def _terms(self):
         """Model keywords for the loads, ground, damping and driven boundaries that are declared."""
-        from .contact import Ground
-        from .damping import Rayleigh
-        from .driven import Translate, Twist
+        from ..physics.contact import Ground
+        from ..physics.damping import Rayleigh
+        from ..physics.driven import Translate, Twist
 
         spec, terms = self.spec, {}
         loads = spec["loads"]
@@ -717,8 +717,8 @@ class Scene:
         return terms
 
     def _run(self, name: str, mesh, mesh_info: dict) -> BuiltRun:
-        from .model import Model
-        from .state import State
+        from ..physics.model import Model
+        from ..dynamics.state import State
 
         spec = self.spec
         body, bpath, integ, ipath = self._variant(name)

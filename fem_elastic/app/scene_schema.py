@@ -9,8 +9,8 @@ solvers are the keys of the tables below (:data:`MATERIALS`,
 :data:`INTEGRATORS`, ...), which map them to the library's classes.
 
 Errors are raised as :class:`Invalid` with the *path* of the offending key, a
-tuple such as ``("compare", 1, "body", "material")``; :mod:`fem_elastic.scene`
-turns it into a :class:`fem_elastic.scene.SceneError` with the file and line.
+tuple such as ``("compare", 1, "body", "material")``; :mod:`fem_elastic.app.scene`
+turns it into a :class:`fem_elastic.app.scene.SceneError` with the file and line.
 
 Units are SI (m, s, kg, Pa, N); angles in a scene file are in degrees.
 """
@@ -25,10 +25,10 @@ import textwrap
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from .contact import METHODS as CONTACT_METHODS
-from .damping import Rayleigh
-from .errors import InvalidParameter
-from .integrators import (
+from ..physics.contact import METHODS as CONTACT_METHODS
+from ..physics.damping import Rayleigh
+from ..errors import InvalidParameter
+from ..dynamics.integrators import (
     RK4,
     ExplicitEuler,
     ImplicitEuler,
@@ -37,9 +37,9 @@ from .integrators import (
     Newmark,
     SymplecticEuler,
 )
-from .linear_solvers import AMGSolver, AutoSolver, DirectSolver
-from .materials import Corotated, LinearElastic, NeoHookean, StableNeoHookean, StVK
-from .springs import lloyd_stiffness, van_gelder_stiffness
+from ..solvers.linear_solvers import AMGSolver, AutoSolver, DirectSolver
+from ..materials import Corotated, LinearElastic, NeoHookean, StableNeoHookean, StVK
+from ..physics.springs import lloyd_stiffness, van_gelder_stiffness
 
 __all__ = [
     "CALIBRATIONS", "INTEGRATORS", "LINEAR_SOLVERS", "MATERIALS", "SCENE_FILE",

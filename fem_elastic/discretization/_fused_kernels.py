@@ -1,4 +1,4 @@
-"""numba kernels behind :mod:`fem_elastic.fused` (imported only by it, and only on first use).
+"""numba kernels behind :mod:`fem_elastic.discretization.fused` (imported only by it, and only on first use).
 
 Everything here is compiled with ``cache=True``: the compile (a few seconds)
 is paid once per machine and later processes load the object code from
@@ -12,7 +12,7 @@ Conventions
 F, P : 9-tuples of floats, a 3x3 matrix row by row (``F[3 i + j] = F_ij``),
     so the pointwise material code stays in registers (no array per point).
 prm : 3-tuple of floats, the material's parameters, see
-    :data:`fem_elastic.fused._REGISTRY` (``(mu, lam, 0)``, or
+    :data:`fem_elastic.discretization.fused._REGISTRY` (``(mu, lam, 0)``, or
     ``(mu', lam', alpha)`` for the stable Neo-Hookean).
 kind : which material the element loops evaluate, one of the constants
     below. One loop serves the four materials: the branch is the same for

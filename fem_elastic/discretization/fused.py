@@ -1,6 +1,6 @@
 """Fused numba kernels for the elastic energy and force of linear (P1) tets.
 
-The numpy path of :class:`fem_elastic.elastic_body.ElasticPotential` builds
+The numpy path of :class:`fem_elastic.physics.elastic_body.ElasticPotential` builds
 the deformation gradient of every element, then the stress of every
 element, then the element forces, each as a ``(3, 3, nelems)`` or
 ``(12, nelems)`` array: on 150k tets most of its time goes to writing and
@@ -56,9 +56,9 @@ from typing import Callable
 
 import numpy as np
 
-from .discretization import Discretization
-from .materials import LinearElastic, NeoHookean, StableNeoHookean, StVK
-from .materials.base import Material
+from .space import Discretization
+from ..materials import LinearElastic, NeoHookean, StableNeoHookean, StVK
+from ..materials.base import Material
 
 __all__ = ["available", "kernels_for", "registry", "FusedP1", "MaterialKernels", "warped_apply"]
 
@@ -295,7 +295,7 @@ def _readonly(a, n: int, name: str) -> np.ndarray:
 
 
 def warped_apply(warped, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``K(x) v`` of a P1 :class:`~fem_elastic.stiffness_warping.WarpedStiffness`, in one pass.
+    """``K(x) v`` of a P1 :class:`~fem_elastic.physics.stiffness_warping.WarpedStiffness`, in one pass.
 
     Per element: F, its polar rotation R (an inverse-free cubic iteration
     for moderate strains, scaled Newton for large ones, LAPACK's SVD for

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from .discretization import Discretization
+from .space import Discretization
 
 __all__ = ["consistent_mass", "lumped_mass"]
 

@@ -13,7 +13,7 @@ scikit-fem evaluates a ``LinearForm`` once per local basis function (12 for
 P1 tets, 30 for P2) and a ``BilinearForm`` once per pair (144 for P1, 900 for
 P2), and these forms re-evaluate the material at every call. That is the
 point: nothing is shared, cached or reordered, so this module is an
-independent check of the vectorized kernel in :mod:`fem_elastic.elastic_body`
+independent check of the vectorized kernel in :mod:`fem_elastic.physics.elastic_body`
 (used by ``tests/test_elastic_body.py``) and the baseline that
 ``scripts/bench_assembly.py`` measures it against. It is far too slow for
 simulation: use :class:`fem_elastic.ElasticPotential` there.

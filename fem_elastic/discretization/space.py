@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 from skfem import Basis, BilinearForm, ElementTetP1, ElementTetP2, ElementVector, MeshTet
 
-from .errors import InvalidMesh, InvalidParameter
+from ..errors import InvalidMesh, InvalidParameter
 
 __all__ = ["Discretization", "SparsityPattern", "check_order"]
 

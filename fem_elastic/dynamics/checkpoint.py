@@ -58,8 +58,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InvalidParameter
-from .io import _atomic_write
+from ..errors import InvalidParameter
+from ..files import _atomic_write
 from .state import State
 from .trajectory import COUNT_FIELDS, STEP_FIELDS, Trajectory
 

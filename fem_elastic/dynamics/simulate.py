@@ -1,29 +1,14 @@
-"""The simulation loop: step, record, watch for blow-up.
+"""The simulation loop: take a step, hand it to the observers, repeat.
 
-``simulate`` advances a State with an integrator, records frames, and stops
-with :class:`fe.Diverged` (carrying the step, time, reason, the last good
-state and the trajectory recorded so far) when
-
-- the state stops being finite,
-- the total energy grows beyond a bound while nothing feeds energy in
-  (no driven boundary is moving the body), or
-- an implicit step fails even after cutting the step.
-
-The energy bound: with ``E_0`` the total energy at the start (or when the
-last driven boundary stops moving or is released) and ``S`` an energy scale
-of the scene (the largest of the initial kinetic, potential and elastic
-energies, the work of the loads over the body's size, and the work of the
-loads carrying the body onto each obstacle), the run diverges when
-``E > E_0 + energy_growth * S``. Damping and implicit schemes only lose
-energy; an unstable scheme multiplies it every step. A symplectic scheme below
-its stability limit conserves a modified energy, not the measured one: the
-measured energy of a mode swings by a factor up to ``1 / (1 - (h omega / 2)^2)``,
-a few percent well below the limit but unbounded as ``h omega -> 2``. Close
-to the limit, with kinetic energy dominating the scale, a bounded run can
-exceed the bound: raise ``energy_growth`` (or lower dt) there (the stability
-study measured a false verdict at 0.93 x the limit on a kicked 100 GPa beam).
-While a driven boundary moves it feeds energy in, and only non-finite values
-are checked.
+``simulate`` advances a State with an integrator. Everything else it does
+with a step is an observer (:mod:`fem_elastic.dynamics.observers`): the
+blow-up watch (non-finite values, an inverted element, energy growth with no
+energy source; its bound is explained there), the recorder of the
+Trajectory's frames, the user's callback and observers, checkpoints and the
+progress bar. A step the integrator cannot take (an implicit step that fails
+even after cutting dt) and a step the watch rejects both end the run with one
+:class:`fe.Diverged`, built by :meth:`Run.diverged`, which carries the step,
+time, reason, the last good state and the trajectory recorded so far.
 """
 
 from __future__ import annotations
@@ -37,16 +22,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import Diverged, InvalidParameter
+from ..errors import Diverged, InvalidParameter
+from .checkpoint import Checkpoint, trajectory_from_records
 from .integrators.base import check_dt, check_state
-from .checkpoint import Checkpoint, _Snapshot, frame_record, trajectory_from_records
+from .observers import BlowUpWatch, Callback, CheckpointWriter, ProgressBar, Recorder, StepEvent
 from .state import State
 from .trajectory import COUNT_FIELDS, STEP_FIELDS, Trajectory
 
-__all__ = ["simulate", "StabilityWarning"]
+__all__ = ["simulate", "StabilityWarning", "Run", "MAX_STEPS"]
 
 log = logging.getLogger(__name__)
-
 
 
 class StabilityWarning(UserWarning):
@@ -69,6 +54,7 @@ def simulate(
     checkpoint_dir=None,
     checkpoint_every: int = 0,
     resume=False,
+    observers=(),
 ) -> Trajectory:
     """Integrate ``model`` in time.
 
@@ -97,12 +83,12 @@ def simulate(
         when ``dt`` exceeds it (not for schemes that sub-step, ``substep=True``).
     energy_growth : float
         Divergence bound on the energy growth, in units of the scene's
-        energy scale (see the module notes); ``inf`` switches the check off.
+        energy scale (:mod:`fem_elastic.dynamics.observers`); ``inf`` switches the check off.
     callback : callable, optional
         ``callback(step, state)`` after every step (e.g. to write output);
         an exception raised there stops the run and propagates.
     checkpoint_dir : str or os.PathLike, optional
-        Write checkpoints to this directory (:mod:`fem_elastic.checkpoint`):
+        Write checkpoints to this directory (:mod:`fem_elastic.dynamics.checkpoint`):
         every ``checkpoint_every`` steps, on Ctrl-C (the last step completed)
         and at the end. Each is written atomically; the recorded history is
         appended, not rewritten.
@@ -117,6 +103,10 @@ def simulate(
         the whole run's, bit for bit what the uninterrupted run records
         (wall times aside); a finished checkpoint returns it at once.
         Without ``resume`` an earlier checkpoint there is replaced.
+    observers : sequence of Observer
+        More :class:`fem_elastic.dynamics.Observer` objects to hand every
+        accepted step to, after the blow-up watch, the recorder and the callback,
+        before the checkpoint (e.g. a :class:`fem_elastic.app.output.SeriesWriter`).
 
     Returns
     -------
@@ -144,128 +134,43 @@ def simulate(
     ((6,), (6, 20, 3), True)
     """
     h = check_dt(dt)
-    if state is None:
-        state = State.rest(model)
+    state = State.rest(model) if state is None else state
     check_state(model, state)
     n_steps = _n_steps(h, t_end, steps, state.t)
-    if callback is not None and not callable(callback):
-        raise InvalidParameter(f"callback must be a function (step, state), got {callback!r}.")
-    if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) or record_every < 1:
-        raise InvalidParameter(f"record_every must be an integer >= 1, got {record_every!r}.")
-    if not (isinstance(energy_growth, (int, float)) and energy_growth > 0):
-        raise InvalidParameter(f"energy_growth must be a number > 0, got {energy_growth!r}.")
-    if isinstance(integrator, type):
-        raise InvalidParameter(
-            f"integrator must be an instance, e.g. fe.{integrator.__name__}(), not the class "
-            f"{integrator.__name__}."
-        )
-    if not hasattr(integrator, "step"):
-        raise InvalidParameter(
-            f"integrator must be e.g. fe.ImplicitEuler() or fe.SymplecticEuler(), got {integrator!r}."
-        )
-    mass = "lumped" if getattr(integrator, "explicit", True) else getattr(integrator, "mass", "lumped")
+    _check_options(integrator, callback, record_every, energy_growth, observers)
     if check_stability and getattr(integrator, "explicit", False) and not getattr(integrator, "substep", False):
         _warn_if_unstable(model, integrator, h)
-
-    rec = _Recorder(model, mass)
     ckpt, start = _checkpointer(model, integrator, h, n_steps, int(record_every), state, energy_growth,
-                                checkpoint_dir, checkpoint_every, resume, rec.frame_size)
-    stats = {k: np.zeros(n_steps, dtype=np.int64) for k in COUNT_FIELDS}
-    for k in STEP_FIELDS[len(COUNT_FIELDS):]:
-        stats[k] = np.zeros(n_steps)
-    cuts: list = []
-    t_start = time.perf_counter()
-    if start is None:
-        e0 = rec.energies(state)
-        e_ref, scale = rec.record(state, e0), _energy_scale(model, state, e0)
-        driving, k0, wall0 = model.driving(state.t), 0, 0.0
-    else:  # continue where the checkpoint left off, with everything the loop had in hand
-        rec.frames = list(start.frames)
-        for name, values in start.step_stats.items():
-            stats[name][:start.step] = values
-        cuts = list(start.cuts)
-        state, k0, wall0 = start.state, start.step, start.wall_time
-        e_ref, scale, driving = start.e_ref, start.scale, start.driving
-        integrator.restore_state(state, start.integrator_state)
-        log.info("resuming at step %d of %d (t = %.6g s) from %s", k0, n_steps, state.t, ckpt.directory)
-
-    def snapshot(k_done):
-        return _Snapshot(k_done, state, len(rec.frames), len(cuts), e_ref, scale, driving,
-                         wall0 + time.perf_counter() - t_start, integrator.checkpoint_state(state))
-
-    snap = snapshot(k0) if ckpt is not None else None
-    check_every = max(1, min(int(record_every), 10))
-    bar = _progress_bar(n_steps, progress, k0)
+                                checkpoint_dir, checkpoint_every, resume, 9 + 6 * model.mesh.p.shape[1])
+    run = Run(model, integrator, h, n_steps, int(record_every), state, start)
+    watch = BlowUpWatch(energy_growth, check_every=min(int(record_every), 10))
+    chain = [watch, Recorder(), *([Callback(callback)] if callback is not None else []), *observers,
+             *([CheckpointWriter(ckpt, watch)] if ckpt is not None else []),
+             *([ProgressBar()] if progress else [])]
+    if start is not None:
+        log.info("resuming at step %d of %d (t = %.6g s) from %s", start.step, n_steps, start.time,
+                 ckpt.directory)
     try:
-        for k in range(k0, n_steps):
-            t0 = time.perf_counter()
-            try:
-                new = integrator.step(model, state, h)
-            except Diverged as err:
-                _collect_cuts(cuts, k, getattr(integrator, "last_stats", None))
-                raise _diverged(err.reason or str(err), k, state, rec, stats, t_start, integrator, h,
-                                cuts, str(err), wall0) from err
-            stats["seconds_step"][k] = time.perf_counter() - t0
-            st = integrator.last_stats
-            for name in COUNT_FIELDS:
-                stats[name][k] = getattr(st, name, 1 if name == "substeps" else 0)
-            for name in ("linearize", "solve", "line_search"):
-                stats[f"seconds_{name}"][k] = st.seconds.get(name, 0.0)
-            _collect_cuts(cuts, k, st)
-            if not (np.isfinite(new.x).all() and np.isfinite(new.v).all()):
-                raise _diverged("non-finite positions or velocities", k, state, rec, stats,
-                                t_start, integrator, h, cuts, None, wall0)
-            last = k == n_steps - 1
-            was_driving, driving = driving, model.driving(new.t)
-            record = (k + 1) % record_every == 0 or last
-            released = was_driving and not driving
-            if record or released or (k + 1) % check_every == 0:
-                e = rec.energies(new)
-                if not math.isfinite(e[2]):
-                    raise _diverged("the energy is not finite (an inverted element?)", k, state, rec,
-                                    stats, t_start, integrator, h, cuts, None, wall0)
-                if released:  # the drive stopped: the energy from here on is the budget
-                    e_ref, scale = e[2], max(scale, abs(e[2]))
-                elif not driving and e[2] > e_ref + energy_growth * scale:
-                    raise _diverged(
-                        f"the total energy grew from {e_ref:.6g} J to {e[2]:.6g} J (more than "
-                        f"{energy_growth:g} x the scene's energy scale {scale:.3g} J) with no "
-                        "energy source", k, state, rec, stats, t_start, integrator, h, cuts, None, wall0,
-                    )
-                if record:
-                    rec.record(new, e)
-            state = new
-            if callback is not None:
-                callback(k, state)
-            if ckpt is not None:
-                # everything the loop holds after k + 1 steps, taken as one: a Ctrl-C from here
-                # on checkpoints this step, never a half-updated one
-                snap = snapshot(k + 1)
-                if ckpt.due(k + 1) and not last:
-                    ckpt.write(snap, rec.frames, stats, cuts)
-            if bar is not None:
-                bar.update(1)
+        for obs in chain:
+            obs.on_start(run)
+        for k in range(run.steps_done, n_steps):
+            new = run.take_step(k)
+            event = StepEvent(k, run.state, new, last=k == n_steps - 1,
+                              record=(k + 1) % run.record_every == 0 or k == n_steps - 1, _run=run)
+            for obs in chain:
+                obs.on_step(run, event)
+            run.state, run.steps_done = new, k + 1
+        run.stop_clock()
+        for obs in chain:
+            obs.on_finish(run)
     except KeyboardInterrupt:
-        if ckpt is not None and snap.step > ckpt.last_step:
-            ckpt.write(snap, rec.frames, stats, cuts)
-            log.warning("interrupted: checkpoint after %d of %d steps (t = %.6g s) in %s; "
-                        "resume=True continues from it", snap.step, n_steps, snap.state.t, ckpt.directory)
+        for obs in chain:
+            obs.on_interrupt(run)
         raise
     finally:
-        if bar is not None:
-            bar.close()
-    wall = wall0 + time.perf_counter() - t_start
-    if ckpt is not None and ckpt.last_step < n_steps:
-        snap.wall_time = wall
-        ckpt.write(snap, rec.frames, stats, cuts)
-    traj = rec.trajectory(stats, n_steps, wall, integrator, h, state, cuts)
-    traj.message = f"completed {n_steps} steps to t = {state.t:.6g} s"
-    if start is not None:
-        traj.resumed_from_step = start.step
-        traj.message += f" (resumed at step {start.step})"
-    log.info("%s: %s in %.3g s", integrator.name if hasattr(integrator, "name") else integrator,
-             traj.message, traj.wall_time)
-    return traj
+        for obs in chain:
+            obs.on_close(run)
+    return run.trajectory(completed=True)
 
 
 def _checkpointer(model, integrator, h, n_steps, record_every, state0, energy_growth, directory,
@@ -299,11 +204,6 @@ def _checkpointer(model, integrator, h, n_steps, record_every, state0, energy_gr
     elif resume:
         log.info("no checkpoint in %s: starting the run from its initial state", d)
     return Checkpointer(d, int(every), fingerprint, frame_size, resume=start), start
-
-
-def _collect_cuts(cuts, k, stats) -> None:
-    for t, dt, reason in getattr(stats, "cuts", ()):
-        cuts.append({"step": int(k), "t": float(t), "dt": float(dt), "reason": str(reason)})
 
 
 #: Most steps one call of simulate takes (its per-step statistics are 10 arrays of this length).
@@ -343,7 +243,7 @@ def _n_steps(h, t_end, steps, t0):
 
 
 def _warn_if_unstable(model, integrator, h):
-    from .modal import critical_time_step
+    from ..solvers.modal import critical_time_step
 
     try:
         dt_crit = critical_time_step(model, integrator)
@@ -361,78 +261,145 @@ def _warn_if_unstable(model, integrator, h):
         warnings.warn(msg, StabilityWarning, stacklevel=3)
 
 
-def _energy_scale(model, state, energies):
-    ke, pe, _ = energies
-    el = model.body_potential.energy(state.x)
-    scale = max(abs(ke), abs(pe), abs(el) if math.isfinite(el) else 0.0)
-    if model.loads:
-        load = float(np.linalg.norm(model.external_force().reshape(-1, 3).sum(axis=0)))
-        load = max(load, float(np.abs(model.external_force()).sum()) / 3.0)
-        nodes = state.x.reshape(-1, 3)
-        size = float(np.ptp(nodes, axis=0).max())
-        scale = max(scale, load * size)  # the work of the loads over the body's size
-        for obstacle in model.obstacles:  # ... and carrying the body onto each obstacle
-            reach = float(np.max(obstacle.signed_distance(nodes)))
-            scale = max(scale, load * (reach + size))
-    return max(scale, 1e3 * model.energy_roundoff())
+class Run:
+    """The loop's context, as :func:`simulate` and its observers share it.
 
+    Attributes
+    ----------
+    model, integrator
+    dt : float
+        Time step (s).
+    n_steps, record_every : int
+    state : State
+        The last accepted state (during ``on_step``: the state before the step observed).
+    steps_done : int
+        Steps accepted so far, over every session of a resumed run.
+    frames : list of numpy.ndarray
+        The recorded frame records (:func:`fem_elastic.dynamics.checkpoint.frame_record`).
+    stats : dict of numpy.ndarray
+        ``(n_steps,)`` per-step statistics (``Trajectory.step_stats``).
+    cuts : list of dict
+        Every failed attempt of a step: ``step``, ``t`` (s), ``dt`` (s), ``reason``.
+    resumed_from : Checkpoint or None
+        The checkpoint the run continues from.
+    """
 
-class _Recorder:
-    """The recorded frames, each one flat record (:func:`fem_elastic.checkpoint.frame_record`)."""
+    def __init__(self, model, integrator, dt, n_steps, record_every, state, resumed_from=None):
+        self.model, self.integrator, self.dt = model, integrator, dt
+        self.n_steps, self.record_every = n_steps, record_every
+        self.mass = "lumped" if getattr(integrator, "explicit", True) else getattr(integrator, "mass", "lumped")
+        self.stats = {k: np.zeros(n_steps, dtype=np.int64) for k in COUNT_FIELDS}
+        self.stats.update({k: np.zeros(n_steps) for k in STEP_FIELDS[len(COUNT_FIELDS):]})
+        self.resumed_from = resumed_from
+        self.state, self.steps_done, self.frames, self.cuts, self._wall0 = state, 0, [], [], 0.0
+        if resumed_from is not None:  # everything the loop had in hand at the checkpoint
+            ck = resumed_from
+            self.state, self.steps_done, self._wall0 = ck.state, ck.step, ck.wall_time
+            self.frames, self.cuts = list(ck.frames), list(ck.cuts)
+            for name, values in ck.step_stats.items():
+                self.stats[name][:ck.step] = values
+            integrator.restore_state(ck.state, ck.integrator_state)
+        self._t_start, self._t_stop = time.perf_counter(), None
 
-    def __init__(self, model, mass):
-        self.model, self.mass = model, mass
-        self.frames = []
-        self.frame_size = 9 + 6 * model.mesh.p.shape[1]
+    def wall_time(self) -> float:
+        """Wall time of the run so far (s), over every session of a resumed run."""
+        return self._wall0 + (self._t_stop or time.perf_counter()) - self._t_start
 
-    def energies(self, state):
+    def stop_clock(self) -> None:
+        """End the run's wall time: the checkpoint and the Trajectory report the same."""
+        self._t_stop = time.perf_counter()
+
+    def energies(self, state) -> tuple[float, float, float]:
+        """Kinetic (with the integrator's mass), potential and total energy of ``state`` (J)."""
         ke = self.model.kinetic_energy(state.v, self.mass)
         pe = self.model.energy(state.x)
         return ke, pe, ke + pe
 
-    def record(self, state, e=None):
-        e = self.energies(state) if e is None else e
-        m = self.model
-        self.frames.append(frame_record(
-            state.t, m.to_vertices(state.x - m.X), m.to_vertices(state.v), e[0], e[1],
-            m.linear_momentum(state.v), m.angular_momentum(state.x, state.v),
-        ))
-        return e[2]
+    def take_step(self, k: int) -> State:
+        """Step ``k`` from ``self.state`` with the integrator; its statistics and cuts are kept."""
+        t0 = time.perf_counter()
+        try:
+            new = self.integrator.step(self.model, self.state, self.dt)
+        except Diverged as err:
+            self._collect_cuts(k, getattr(self.integrator, "last_stats", None))
+            raise self.diverged(err.reason or str(err), detail=str(err)) from err
+        self.stats["seconds_step"][k] = time.perf_counter() - t0
+        st = self.integrator.last_stats
+        for name in COUNT_FIELDS:
+            self.stats[name][k] = getattr(st, name, 1 if name == "substeps" else 0)
+        for name in ("linearize", "solve", "line_search"):
+            self.stats[f"seconds_{name}"][k] = st.seconds.get(name, 0.0)
+        self._collect_cuts(k, st)
+        return new
 
-    def trajectory(self, stats, n, wall, integrator, h, state, cuts):
-        return trajectory_from_records(
-            np.reshape(self.frames, (len(self.frames), self.frame_size)),
-            step_stats={k: v[:n] for k, v in stats.items()}, wall_time=wall, steps=n, dt=h,
-            integrator=getattr(integrator, "name", str(integrator)), final_state=state, cuts=list(cuts),
+    def _collect_cuts(self, k, stats) -> None:
+        for t, dt, reason in getattr(stats, "cuts", ()):
+            self.cuts.append({"step": int(k), "t": float(t), "dt": float(dt), "reason": str(reason)})
+
+    def trajectory(self, completed: bool = False) -> Trajectory:
+        """The Trajectory of the steps accepted so far (``completed``: the run's final one)."""
+        k = self.steps_done
+        size = 9 + 6 * self.model.mesh.p.shape[1]
+        traj = trajectory_from_records(
+            np.reshape(self.frames, (len(self.frames), size)),
+            step_stats={name: v[:k] for name, v in self.stats.items()}, wall_time=self.wall_time(),
+            steps=k, dt=self.dt, integrator=getattr(self.integrator, "name", str(self.integrator)),
+            final_state=self.state, cuts=list(self.cuts),
         )
+        if completed:
+            traj.message = f"completed {k} steps to t = {self.state.t:.6g} s"
+            if self.resumed_from is not None:
+                traj.resumed_from_step = self.resumed_from.step
+                traj.message += f" (resumed at step {self.resumed_from.step})"
+            log.info("%s: %s in %.3g s", getattr(self.integrator, "name", self.integrator),
+                     traj.message, traj.wall_time)
+        return traj
+
+    def diverged(self, reason: str, detail: str | None = None) -> Diverged:
+        """The :class:`fe.Diverged` that ends the run at the step after ``self.state``.
+
+        It carries the frames recorded up to the last good state (``err.trajectory``).
+        ``detail``: an integrator's own message, which carries its advice.
+        """
+        k, state = self.steps_done, self.state
+        traj = self.trajectory()
+        traj.message = f"diverged at step {k}: {reason}"
+        if getattr(self.integrator, "explicit", True):
+            advice = "Try a smaller dt, an implicit integrator (fe.ImplicitEuler), or damping."
+        elif detail:  # an implicit scheme's own failure carries its advice
+            advice = ""
+        else:
+            advice = "Try a smaller dt or damping."
+        err = Diverged(
+            f"the simulation diverged at step {k} (t = {state.t:.6g} s): "
+            f"{(detail or reason).rstrip('.')}. The last good state and the frames recorded so far "
+            f"are attached (err.last_good_state, err.trajectory). {advice}".rstrip(),
+            step=k, time=state.t, reason=reason, last_good_state=state,
+        )
+        err.trajectory = traj
+        return err
 
 
-def _diverged(reason, k, state, rec, stats, t_start, integrator, h, cuts, detail=None, wall0=0.0):
-    """fe.Diverged at step k, with the frames recorded up to the last good state (k steps taken)."""
-    traj = rec.trajectory(stats, k, wall0 + time.perf_counter() - t_start, integrator, h, state, cuts)
-    traj.message = f"diverged at step {k}: {reason}"
-    if getattr(integrator, "explicit", True):
-        advice = "Try a smaller dt, an implicit integrator (fe.ImplicitEuler), or damping."
-    elif detail:  # an implicit scheme's own failure carries its advice
-        advice = ""
-    else:
-        advice = "Try a smaller dt or damping."
-    err = Diverged(
-        f"the simulation diverged at step {k} (t = {state.t:.6g} s): {(detail or reason).rstrip('.')}. The last "
-        "good state and the frames recorded so far are attached (err.last_good_state, "
-        f"err.trajectory). {advice}".rstrip(),
-        step=k, time=state.t, reason=reason, last_good_state=state,
-    )
-    err.trajectory = traj
-    return err
-
-
-def _progress_bar(n, progress, initial=0):
-    if not progress:
-        return None
-    try:
-        from tqdm.auto import tqdm
-    except ImportError:
-        log.warning("progress=True needs tqdm (pip install fem_elastic[cli]); running without a bar")
-        return None
-    return tqdm(total=n, initial=initial, unit="step", desc="simulate")
+def _check_options(integrator, callback, record_every, energy_growth, observers) -> None:
+    if callback is not None and not callable(callback):
+        raise InvalidParameter(f"callback must be a function (step, state), got {callback!r}.")
+    if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) or record_every < 1:
+        raise InvalidParameter(f"record_every must be an integer >= 1, got {record_every!r}.")
+    if not (isinstance(energy_growth, (int, float)) and energy_growth > 0):
+        raise InvalidParameter(f"energy_growth must be a number > 0, got {energy_growth!r}.")
+    if isinstance(integrator, type):
+        raise InvalidParameter(
+            f"integrator must be an instance, e.g. fe.{integrator.__name__}(), not the class "
+            f"{integrator.__name__}."
+        )
+    if not hasattr(integrator, "step"):
+        raise InvalidParameter(
+            f"integrator must be e.g. fe.ImplicitEuler() or fe.SymplecticEuler(), got {integrator!r}."
+        )
+    for obs in observers:
+        if not all(callable(getattr(obs, hook, None)) for hook in
+                   ("on_start", "on_step", "on_finish", "on_interrupt", "on_close")):
+            raise InvalidParameter(
+                f"observers must be fe.dynamics.Observer instances (on_start, on_step, "
+                f"on_finish, on_interrupt, on_close), got {obs!r}."
+            )

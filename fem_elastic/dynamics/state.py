@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InvalidParameter
+from ..errors import InvalidParameter
 
 __all__ = ["State"]
 

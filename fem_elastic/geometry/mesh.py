@@ -28,7 +28,7 @@ from collections.abc import Mapping
 import numpy as np
 from skfem import MeshTet, MeshTet2
 
-from .errors import InvalidMesh, InvalidParameter
+from ..errors import InvalidMesh, InvalidParameter
 
 __all__ = [
     "DEGENERATE_TOL",
@@ -337,7 +337,7 @@ def boundary_facets(mesh: MeshTet, name: str, *, what: str) -> np.ndarray:
 
     Examples
     --------
-    >>> import fem_elastic.mesh as fm
+    >>> import fem_elastic.geometry.mesh as fm
     >>> fm.boundary_facets(fm.beam_mesh(), "left", what="Support").size
     8
     """
@@ -373,7 +373,7 @@ def signed_volumes(mesh: MeshTet) -> np.ndarray:
 
     Examples
     --------
-    >>> import fem_elastic.mesh as fm
+    >>> import fem_elastic.geometry.mesh as fm
     >>> v = fm.signed_volumes(fm.beam_mesh(1.0, 0.1, 0.1, cells=(4, 1, 1)))
     >>> bool(v.min() > 0), round(float(v.sum()), 12)
     (True, 0.01)
@@ -414,7 +414,7 @@ def validate_mesh(mesh, *, degenerate_tol: float = DEGENERATE_TOL):
     Examples
     --------
     >>> import numpy as np
-    >>> import fem_elastic.mesh as fm
+    >>> import fem_elastic.geometry.mesh as fm
     >>> from fem_elastic.errors import InvalidMesh
     >>> mesh = fm.beam_mesh()
     >>> fm.validate_mesh(mesh) is mesh
@@ -488,7 +488,7 @@ def mesh_from_arrays(
 
     Examples
     --------
-    >>> import fem_elastic.mesh as fm
+    >>> import fem_elastic.geometry.mesh as fm
     >>> points = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]
     >>> mesh = fm.mesh_from_arrays(points, [[0, 1, 2, 3]], {"base": [[0, 2, 1]]})
     >>> mesh.t.shape, mesh.boundaries["base"].size
@@ -542,7 +542,7 @@ def reorient(mesh: MeshTet) -> MeshTet:
     Examples
     --------
     >>> import numpy as np
-    >>> import fem_elastic.mesh as fm
+    >>> import fem_elastic.geometry.mesh as fm
     >>> cube = fm.MeshTet.init_tensor(*(np.linspace(0, 1, 3),) * 3)
     >>> bool((fm.signed_volumes(cube) < 0).any())
     True
@@ -573,7 +573,7 @@ def remove_unused_vertices(mesh: MeshTet) -> MeshTet:
     Examples
     --------
     >>> import numpy as np
-    >>> import fem_elastic.mesh as fm
+    >>> import fem_elastic.geometry.mesh as fm
     >>> p = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [5, 5, 5.0]]).T
     >>> fm.remove_unused_vertices(fm.MeshTet(p, np.array([[0, 1, 2, 3]]).T)).p.shape
     (3, 4)
@@ -624,7 +624,7 @@ def mesh_quality(mesh: MeshTet) -> dict:
 
     Examples
     --------
-    >>> import fem_elastic.mesh as fm
+    >>> import fem_elastic.geometry.mesh as fm
     >>> q = fm.mesh_quality(fm.beam_mesh(cells=(10, 1, 1)))
     >>> q["n_elements"], q["boundaries"]["left"], round(q["volume"], 12)
     (60, 2, 0.01)
@@ -694,7 +694,7 @@ def beam_mesh(
 
     Examples
     --------
-    >>> import fem_elastic.mesh as fm
+    >>> import fem_elastic.geometry.mesh as fm
     >>> mesh = fm.beam_mesh(length=2.0, width=0.2, height=0.1, cells=(10, 2, 1))
     >>> mesh.p.shape, mesh.t.shape
     ((3, 66), (4, 120))

@@ -1,10 +1,9 @@
-"""Reading and writing tet meshes and VTU time series through meshio.
+"""Reading and writing tet meshes through meshio.
 
-This is the only module that imports meshio, and it does so inside the
-functions, so ``import fem_elastic`` works without meshio installed.
-Every file is written atomically (a temporary file in the same directory,
-flushed and fsync'ed, then ``os.replace``): a crash or Ctrl-C leaves either
-the old file or the new one, never half of one.
+meshio is imported inside the functions (here and in :mod:`fem_elastic.app.vtu`,
+the results' files), so ``import fem_elastic`` works without meshio installed.
+Every file is written atomically (:mod:`fem_elastic.files`): a crash or Ctrl-C
+leaves either the old file or the new one, never half of one.
 
 Named boundaries travel with the file:
 
@@ -22,24 +21,16 @@ skfem's encoding are all turned into named boundaries.
 from __future__ import annotations
 
 import errno
-import json
 import logging
-import os
-import tempfile
-import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from .errors import InvalidMesh, InvalidParameter
+from ..errors import InvalidMesh, InvalidParameter
+from ..files import _atomic_write
 from .mesh import MeshTet, MeshTet2, _boundary_triples, _check_arrays, _from_arrays
 
-__all__ = [
-    "load_mesh", "save_mesh", "write_vtu_frame", "write_pvd", "read_series", "SeriesData",
-    "write_text_atomic",
-]
+__all__ = ["load_mesh", "save_mesh"]
 
 logger = logging.getLogger(__name__)
 
@@ -137,7 +128,7 @@ def load_mesh(path, *, reorient: bool = False, validate: bool = True) -> MeshTet
         Swap two vertices of every negatively oriented tet, for files written
         with the opposite orientation convention.
     validate : bool, optional
-        Run :func:`fem_elastic.mesh.validate_mesh` on the result.
+        Run :func:`fem_elastic.geometry.mesh.validate_mesh` on the result.
 
     Returns
     -------
@@ -159,8 +150,8 @@ def load_mesh(path, *, reorient: bool = False, validate: bool = True) -> MeshTet
     Examples
     --------
     >>> import tempfile, pathlib
-    >>> import fem_elastic.mesh as fm
-    >>> from fem_elastic.io import load_mesh, save_mesh
+    >>> import fem_elastic.geometry.mesh as fm
+    >>> from fem_elastic.geometry.mesh_io import load_mesh, save_mesh
     >>> with tempfile.TemporaryDirectory() as tmp:
     ...     mesh = load_mesh(save_mesh(fm.beam_mesh(), pathlib.Path(tmp) / "beam.vtu"))
     >>> mesh.t.shape, mesh.boundaries["left"].size
@@ -263,15 +254,6 @@ def _gmsh_meshio(mesh: MeshTet):
     return meshio.Mesh(mesh.p.T, cells, cell_data=cell_data, field_data=field_data)
 
 
-def _new_file_mode(path: Path) -> int:
-    """Mode a plain ``open(path, "w")`` would give: the old file's, else 0666 & ~umask."""
-    if path.exists():
-        return path.stat().st_mode & 0o777
-    umask = os.umask(0)
-    os.umask(umask)
-    return 0o666 & ~umask
-
-
 _READ_FAILURES: dict = {}  # path -> why its last _meshio_read failed
 
 
@@ -324,8 +306,8 @@ def save_mesh(mesh: MeshTet, path) -> Path:
     Examples
     --------
     >>> import tempfile, pathlib
-    >>> import fem_elastic.mesh as fm
-    >>> from fem_elastic.io import save_mesh
+    >>> import fem_elastic.geometry.mesh as fm
+    >>> from fem_elastic.geometry.mesh_io import save_mesh
     >>> with tempfile.TemporaryDirectory() as tmp:
     ...     print(save_mesh(fm.beam_mesh(), pathlib.Path(tmp) / "beam.msh").name)
     beam.msh
@@ -353,391 +335,4 @@ def save_mesh(mesh: MeshTet, path) -> Path:
 
     return _atomic_write(
         path, lambda tmp: meshio.write(tmp, mio, file_format=file_format, **options)
-    )
-
-
-# --- atomic files ------------------------------------------------------------------------
-
-
-def _fsync_directory(directory: Path) -> None:
-    """Make a rename in ``directory`` durable (POSIX; a no-op where unsupported)."""
-    try:
-        fd = os.open(directory, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
-def _atomic_write(path: Path, write) -> Path:
-    """Call ``write(tmp_path)`` on a temporary file beside ``path``, then move it over ``path``.
-
-    The temporary file is fsync'ed before ``os.replace`` so that the rename
-    never exposes a file whose bytes are not on disk yet; on any error
-    (KeyboardInterrupt included) it is removed and ``path`` is left as it was.
-    """
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        write(tmp)
-        with open(tmp, "rb+") as fh:
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, _new_file_mode(path))  # mkstemp makes it owner-only (0600)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    _fsync_directory(path.parent)
-    return path
-
-
-def write_text_atomic(path, text: str) -> Path:
-    """Write ``text`` (UTF-8) to ``path`` atomically.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        Destination; its directory must exist.
-    text : str
-
-    Returns
-    -------
-    pathlib.Path
-        ``path``.
-
-    Examples
-    --------
-    >>> import tempfile, pathlib
-    >>> from fem_elastic.io import write_text_atomic
-    >>> with tempfile.TemporaryDirectory() as tmp:
-    ...     print(write_text_atomic(pathlib.Path(tmp) / "a.txt", "hi").read_text())
-    hi
-    """
-
-    def write(tmp):
-        with open(tmp, "w", encoding="utf-8") as fh:
-            fh.write(text)
-
-    return _atomic_write(Path(path), write)
-
-
-# --- VTU frames and the PVD collection ----------------------------------------------------
-
-
-def write_vtu_frame(path, points, tets, point_data=None, cell_data=None, *,
-                    compression: str | None = "zlib") -> Path:
-    """Write one frame of a series: a tet grid with point and cell data, as XML VTU.
-
-    Written with meshio's VTU writer (VTK XML ``UnstructuredGrid``, binary,
-    zlib-compressed by default), which ParaView, VisIt and pyvista open, and atomically.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        Destination ``.vtu`` file; its directory must exist.
-    points : array_like
-        ``(n, 3)`` point coordinates (m), usually the deformed positions.
-    tets : array_like
-        ``(m, 4)`` vertex indices of the linear tets.
-    point_data : dict of str to array_like, optional
-        Arrays of shape ``(n,)`` or ``(n, k)``, e.g. ``"displacement"`` (m).
-    cell_data : dict of str to array_like, optional
-        Arrays of shape ``(m,)`` or ``(m, k)``, e.g. ``"von_mises"`` (Pa).
-        NaN and inf are stored as such.
-    compression : {"zlib", "lzma", None}
-        Compression of the binary arrays. On a 10k-tet frame zlib halves the
-        file (~0.5 MB instead of ~1.1 MB) and takes ~30 ms against ~4 ms
-        without: pass None where write time matters more than disk.
-
-    Returns
-    -------
-    pathlib.Path
-        ``path``.
-
-    Raises
-    ------
-    InvalidParameter
-        An array's leading dimension does not match the points or tets, or
-        ``compression`` is not one of the above.
-
-    Examples
-    --------
-    >>> import tempfile, pathlib
-    >>> import numpy as np
-    >>> import meshio
-    >>> from fem_elastic.io import write_vtu_frame
-    >>> pts = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
-    >>> with tempfile.TemporaryDirectory() as tmp:
-    ...     f = write_vtu_frame(pathlib.Path(tmp) / "f.vtu", pts, [[0, 1, 2, 3]],
-    ...                         {"displacement": np.zeros((4, 3))}, {"von_mises": [1.5]})
-    ...     print(meshio.read(f).cell_data["von_mises"][0])
-    [1.5]
-    """
-    import meshio
-
-    points = np.ascontiguousarray(points, dtype=np.float64)
-    tets = np.ascontiguousarray(tets, dtype=np.int64)
-    if points.ndim != 2 or points.shape[1] != 3 or tets.ndim != 2 or tets.shape[1] != 4:
-        raise InvalidParameter(
-            f"write_vtu_frame needs points (n, 3) and tets (m, 4), got {points.shape} and "
-            f"{tets.shape}."
-        )
-    pdata = {}
-    for name, value in (point_data or {}).items():
-        value = np.ascontiguousarray(value, dtype=np.float64)
-        if value.shape[:1] != (points.shape[0],):
-            raise InvalidParameter(
-                f"point_data[{name!r}] has shape {value.shape}; it needs one row per point "
-                f"({points.shape[0]})."
-            )
-        pdata[name] = value
-    cdata = {}
-    for name, value in (cell_data or {}).items():
-        value = np.ascontiguousarray(value, dtype=np.float64)
-        if value.shape[:1] != (tets.shape[0],):
-            raise InvalidParameter(
-                f"cell_data[{name!r}] has shape {value.shape}; it needs one row per tet "
-                f"({tets.shape[0]})."
-            )
-        cdata[name] = [value]
-    if compression not in ("zlib", "lzma", None):
-        raise InvalidParameter(
-            f"compression must be 'zlib', 'lzma' or None, got {compression!r}."
-        )
-    mio = meshio.Mesh(points, [("tetra", tets)], point_data=pdata, cell_data=cdata)
-    return _atomic_write(
-        Path(path),
-        lambda tmp: meshio.write(tmp, mio, file_format="vtu", compression=compression),
-    )
-
-
-def write_pvd(path, entries) -> Path:
-    """Write a ParaView collection (``.pvd``) listing the frames of a series with their times.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        Destination ``.pvd`` file.
-    entries : iterable of (float, str)
-        ``(time, file)`` pairs: time in s, file relative to the ``.pvd``'s
-        directory (e.g. ``"frames/frame_000000.vtu"``). Times are written
-        with 17 significant digits, so they read back exactly.
-
-    Returns
-    -------
-    pathlib.Path
-        ``path``.
-
-    Examples
-    --------
-    >>> import tempfile, pathlib
-    >>> from fem_elastic.io import write_pvd
-    >>> with tempfile.TemporaryDirectory() as tmp:
-    ...     text = write_pvd(pathlib.Path(tmp) / "s.pvd", [(0.0, "frames/f0.vtu")]).read_text()
-    >>> 'timestep="0"' in text and 'file="frames/f0.vtu"' in text
-    True
-    """
-    lines = [
-        '<?xml version="1.0"?>',
-        '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
-        "  <Collection>",
-    ]
-    for time, file in entries:
-        time = float(time)
-        lines.append(
-            f'    <DataSet timestep="{time:.17g}" group="" part="0" '
-            f"file={quoteattr(Path(file).as_posix())}/>"
-        )
-    lines += ["  </Collection>", "</VTKFile>", ""]
-    return write_text_atomic(path, "\n".join(lines))
-
-
-@dataclass
-class SeriesData:
-    """A VTU time series read back by :func:`read_series`.
-
-    Attributes
-    ----------
-    times : numpy.ndarray
-        ``(T,)`` frame times (s), in the PVD's order.
-    points_ref : numpy.ndarray
-        ``(n, 3)`` reference vertex positions (m): the first frame's points
-        minus its displacement.
-    tets : numpy.ndarray
-        ``(m, 4)`` vertex indices of the tets.
-    displacement, velocity : numpy.ndarray
-        ``(T, n, 3)`` vertex displacement (m) and velocity (m/s).
-    cell_data : dict of str to numpy.ndarray
-        ``(T, m)`` per-tet fields present in every frame read, e.g.
-        ``"von_mises"`` (Pa) and ``"energy_density"`` (J/m^3).
-    summary : dict
-        The run's ``summary.json``, or ``{}`` when there is none (yet).
-    files : list of pathlib.Path
-        The frame files read, one per time.
-    """
-
-    times: np.ndarray
-    points_ref: np.ndarray
-    tets: np.ndarray
-    displacement: np.ndarray
-    velocity: np.ndarray
-    cell_data: dict = field(default_factory=dict)
-    summary: dict = field(default_factory=dict)
-    files: list = field(default_factory=list)
-
-    @property
-    def points(self) -> np.ndarray:
-        """``(T, n, 3)`` deformed vertex positions (m)."""
-        return self.points_ref[None] + self.displacement
-
-
-def _pvd_entries(pvd: Path) -> list[tuple[float, Path]]:
-    try:
-        root = ET.parse(pvd).getroot()
-    except (ET.ParseError, OSError) as err:
-        raise InvalidParameter(
-            f"{str(pvd)!r} is not a readable ParaView collection ({err}); it is written "
-            "atomically by fem_elastic, so it was made or changed by something else: "
-            "rerun the simulation to rewrite it."
-        ) from err
-    entries = []
-    for ds in root.iter("DataSet"):
-        file, time = ds.get("file"), ds.get("timestep")
-        try:
-            entries.append((float(time), pvd.parent / file))
-        except (TypeError, ValueError):
-            logger.warning("%s: skipping a DataSet without a valid file and timestep", pvd)
-    return entries
-
-
-def _read_frame(path: Path):
-    """(points, tets, point_data, cell_data) of one frame, or None with a warning."""
-    import meshio
-
-    if not path.is_file():
-        logger.warning("%s: frame listed in the series but missing; skipped", path)
-        return None
-    try:
-        # meshio's VTU reader itself: meshio.read(..., file_format=...) calls sys.exit
-        # when the reader fails.
-        mio = meshio.vtu.read(path)
-    except Exception as err:  # meshio raises ReadError, ParseError, zlib.error, ValueError...
-        logger.warning("%s: frame could not be read (%s: %s); skipped", path,
-                       type(err).__name__, err)
-        return None
-    blocks = [i for i, b in enumerate(mio.cells) if b.type == "tetra"]
-    n = mio.points.shape[0]
-    problems = []
-    if not blocks:
-        problems.append("no tetra cells")
-    for name in ("displacement", "velocity"):
-        value = mio.point_data.get(name)
-        if value is None or np.shape(value) != (n, 3):
-            problems.append(f"no (n, 3) point data {name!r}")
-    if problems:
-        logger.warning("%s: incomplete frame (%s); skipped", path, ", ".join(problems))
-        return None
-    tets = np.vstack([mio.cells[i].data for i in blocks]).astype(np.int64)
-    cells = {
-        name: np.concatenate([np.asarray(value[i], dtype=np.float64).ravel() for i in blocks])
-        for name, value in mio.cell_data.items()
-        if all(np.asarray(value[i]).ndim == 1 for i in blocks)
-    }
-    pdata = {k: np.asarray(mio.point_data[k], dtype=np.float64)
-             for k in ("displacement", "velocity")}
-    return np.asarray(mio.points, dtype=np.float64), tets, pdata, cells
-
-
-def read_series(run_dir) -> SeriesData:
-    """Read a run directory's VTU series (``series.pvd``, ``frames/``, ``summary.json``).
-
-    Only frames that the PVD lists, that exist and that read back complete
-    (tets, ``displacement`` and ``velocity``, the same grid as the first
-    frame) are returned; any other is skipped with a logged warning, so a
-    run interrupted mid-write still reads back up to its last whole frame.
-
-    Parameters
-    ----------
-    run_dir : str or os.PathLike
-        Directory holding ``series.pvd``.
-
-    Returns
-    -------
-    SeriesData
-
-    Raises
-    ------
-    InvalidParameter
-        ``run_dir`` has no ``series.pvd``, the PVD cannot be parsed, or none
-        of its frames can be read.
-
-    Examples
-    --------
-    >>> import tempfile, pathlib
-    >>> import numpy as np
-    >>> from fem_elastic.io import write_vtu_frame, write_pvd, read_series
-    >>> pts = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
-    >>> zero = {"displacement": np.zeros((4, 3)), "velocity": np.zeros((4, 3))}
-    >>> with tempfile.TemporaryDirectory() as tmp:
-    ...     run = pathlib.Path(tmp)
-    ...     _ = write_vtu_frame(run / "f0.vtu", pts, [[0, 1, 2, 3]], zero, {"von_mises": [0.0]})
-    ...     _ = write_pvd(run / "series.pvd", [(0.0, "f0.vtu")])
-    ...     series = read_series(run)
-    >>> series.times, series.displacement.shape, series.cell_data["von_mises"].shape
-    (array([0.]), (1, 4, 3), (1, 1))
-    """
-    run_dir = Path(run_dir)
-    pvd = run_dir / "series.pvd"
-    if not pvd.is_file():
-        raise InvalidParameter(
-            f"{str(run_dir)!r} holds no series.pvd, so it is not a fem_elastic run directory "
-            "(or the run wrote no frame yet). Pass the directory given to --out / "
-            "SeriesWriter, the one that contains series.pvd."
-        )
-    times, disp, vel, cells, files = [], [], [], [], []
-    points_ref = tets = None
-    for time, path in _pvd_entries(pvd):
-        frame = _read_frame(path)
-        if frame is None:
-            continue
-        points, frame_tets, pdata, cdata = frame
-        if tets is None:
-            tets = frame_tets
-            points_ref = points - pdata["displacement"]
-        elif not np.array_equal(frame_tets, tets) or points.shape != points_ref.shape:
-            logger.warning("%s: frame has a different grid from the first frame; skipped", path)
-            continue
-        times.append(time)
-        disp.append(pdata["displacement"])
-        vel.append(pdata["velocity"])
-        cells.append(cdata)
-        files.append(path)
-    if not times:
-        raise InvalidParameter(
-            f"none of the frames listed in {str(pvd)!r} could be read (see the warnings "
-            "logged above): the run stopped before writing a whole frame; rerun it."
-        )
-    names = [k for k in cells[0] if all(k in c and c[k].shape == cells[0][k].shape for c in cells)]
-    summary = {}
-    summary_path = run_dir / "summary.json"
-    if summary_path.is_file():
-        try:
-            summary = json.loads(summary_path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as err:
-            logger.warning("%s: could not be read (%s); summary left empty", summary_path, err)
-    return SeriesData(
-        times=np.array(times, dtype=np.float64),
-        points_ref=points_ref,
-        tets=tets,
-        displacement=np.stack(disp),
-        velocity=np.stack(vel),
-        cell_data={k: np.stack([c[k] for c in cells]) for k in names},
-        summary=summary,
-        files=files,
     )

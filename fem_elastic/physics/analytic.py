@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .materials.base import _check_E_nu
+from ..materials.base import _check_E_nu
 
 __all__ = ["RectangularCantilever", "elastica_tip"]
 
@@ -61,7 +61,7 @@ class RectangularCantilever:
         for name in ("length", "width", "height"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
-                from .errors import InvalidParameter
+                from ..errors import InvalidParameter
 
                 raise InvalidParameter(f"{name} must be finite and > 0 m, got {v!r}.")
 
@@ -155,7 +155,7 @@ def elastica_tip(alpha: float) -> tuple[float, float]:
     from scipy.optimize import brentq
 
     if not (math.isfinite(alpha) and alpha >= 0.0):
-        from .errors import InvalidParameter
+        from ..errors import InvalidParameter
 
         raise InvalidParameter(f"alpha = P L^2 / (E I) must be finite and >= 0, got {alpha!r}.")
     if alpha == 0.0:

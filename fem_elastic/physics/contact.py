@@ -89,7 +89,7 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import InvalidParameter
+from ..errors import InvalidParameter
 from .potential import Potential
 
 __all__ = [
@@ -343,7 +343,7 @@ class PenaltyContact(ContactPotential):
     Examples
     --------
     >>> import numpy as np
-    >>> import fem_elastic.contact as fc
+    >>> import fem_elastic.physics.contact as fc
     >>> pot = fc.PenaltyContact(fc.Ground(), np.zeros(6), stiffness=100.0)
     >>> x = np.array([0.0, 0.0, -0.01, 0.0, 0.0, 0.5])  # node 0 is 1 cm deep, node 1 above
     >>> round(pot.energy(x), 6), pot.contact_force(x).round(6).tolist()  # J, N
@@ -381,7 +381,7 @@ class BarrierContact(ContactPotential):
     Examples
     --------
     >>> import numpy as np
-    >>> import fem_elastic.contact as fc
+    >>> import fem_elastic.physics.contact as fc
     >>> pot = fc.BarrierContact(fc.Ground(), np.zeros(3), kappa=1.0, dhat=1e-3)
     >>> pot.energy(np.array([0.0, 0.0, 2e-3])), pot.energy(np.array([0.0, 0.0, -1e-6]))
     (0.0, inf)
@@ -519,7 +519,7 @@ class Obstacle:
 
         Examples
         --------
-        >>> import fem_elastic.contact as fc
+        >>> import fem_elastic.physics.contact as fc
         >>> fc.Ground(penetration=1e-3).node_stiffness([0.25, 0.25, 0.5])  # 1 kg: 9.81 N / 1 mm
         9810.0
         """
@@ -547,7 +547,7 @@ class Obstacle:
 
         Examples
         --------
-        >>> import fem_elastic.contact as fc
+        >>> import fem_elastic.physics.contact as fc
         >>> round(fc.Ground(penetration=1e-3).critical_omega([0.5, 0.5]), 3)  # sqrt(9810 / 0.5)
         140.071
         """
@@ -588,7 +588,7 @@ class Obstacle:
         --------
         >>> import fem_elastic as fe
         >>> from fem_elastic.discretization import Discretization
-        >>> from fem_elastic.mass import lumped_mass
+        >>> from fem_elastic.discretization.mass import lumped_mass
         >>> space = Discretization(fe.beam_mesh(0.1, 0.1, 0.1, cells=(1, 1, 1)), order=1)
         >>> m = lumped_mass(space, density=1000.0)[0::3]  # 1 kg in all
         >>> pot = Ground(z=1e-4).build(space, m)  # the bottom face 0.1 mm below the plane

@@ -30,7 +30,7 @@ import math
 import numbers
 from dataclasses import dataclass
 
-from .errors import InvalidParameter
+from ..errors import InvalidParameter
 
 __all__ = ["Rayleigh"]
 

@@ -18,7 +18,7 @@ import numbers
 
 import numpy as np
 
-from .errors import InvalidParameter
+from ..errors import InvalidParameter
 from .loads import as_vector3
 
 __all__ = ["Motion", "Twist", "Translate", "Prescribed"]

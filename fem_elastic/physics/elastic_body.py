@@ -16,7 +16,7 @@ scikit-fem supplies the basis, quadrature and DOF maps (see
 vectorized kernel over all elements at once, because scikit-fem's generic
 ``BilinearForm`` evaluates the form once per pair of local basis functions
 (144 pairs for P1, 900 for P2), re-evaluating the material tangent each time.
-:mod:`fem_elastic.skfem_forms` keeps that plain form assembly as the
+:mod:`fem_elastic.discretization.skfem_forms` keeps that plain form assembly as the
 reference the tests compare this kernel with.
 """
 
@@ -28,9 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .discretization import Discretization, check_order
-from .errors import InvalidParameter
-from .materials.base import Material
+from ..discretization.space import Discretization, check_order
+from ..errors import InvalidParameter
+from ..materials.base import Material
 from .potential import Potential
 
 __all__ = ["ElasticBody", "ElasticPotential"]
@@ -98,9 +98,9 @@ class ElasticPotential(Potential):
         return self.material.psi(self.F(x))
 
     def _fused(self):
-        """The fused numba kernels of :mod:`fem_elastic.fused` (P1, registered
+        """The fused numba kernels of :mod:`fem_elastic.discretization.fused` (P1, registered
         materials, numba importable, ``FEM_ELASTIC_NUMBA`` not 0), or None: numpy path."""
-        from . import fused  # numba itself is imported there, on first use only
+        from ..discretization import fused  # numba itself is imported there, on first use only
 
         return fused.kernels_for(self.material, self.space)
 

@@ -10,7 +10,7 @@ What a VTU frame colours a mesh by, one value per (vertex) tet of the mesh:
     ``sum_t energy_density_t V_t`` (``V_t`` the reference tet volume) is the
     body's elastic energy.
 
-FEM bodies (:class:`~fem_elastic.elastic_body.ElasticPotential`, P1 or P2)
+FEM bodies (:class:`~fem_elastic.physics.elastic_body.ElasticPotential`, P1 or P2)
 --------------------------------------------------------------------------
 At each quadrature point, with ``P = dpsi_dF(F)`` the first Piola-Kirchhoff
 stress and ``J = det F``,
@@ -28,7 +28,7 @@ point is inverted: its von Mises stress is NaN (a Cauchy stress does not
 exist there), and its energy density is whatever the material gives
 (``+inf`` for :class:`~fem_elastic.materials.NeoHookean`).
 
-Mass-spring bodies (:class:`~fem_elastic.springs.SpringPotential`)
+Mass-spring bodies (:class:`~fem_elastic.physics.springs.SpringPotential`)
 ------------------------------------------------------------------
 A spring on edge ``e`` is shared by the tets around that edge; each tet
 ``t`` takes the share ``w_et = V_t / sum_{t' ∋ e} V_t'`` of it (by
@@ -56,9 +56,9 @@ import logging
 import numpy as np
 
 from .elastic_body import ElasticPotential
-from .errors import InvalidParameter
-from .materials.base import _det
-from .mesh import _signed_volumes
+from ..errors import InvalidParameter
+from ..materials.base import _det
+from ..geometry.mesh import _signed_volumes
 from .springs import SpringPotential
 
 __all__ = ["CellFields", "cell_fields", "von_mises"]

@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 from skfem import FacetBasis, LinearForm
 
-from .discretization import Discretization
-from .errors import InvalidParameter
-from .mesh import boundary_facets
+from ..discretization.space import Discretization
+from ..errors import InvalidParameter
+from ..geometry.mesh import boundary_facets
 from .potential import LinearPotential
 
 __all__ = ["gravity_load", "traction_load", "as_vector3"]

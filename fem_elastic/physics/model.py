@@ -29,11 +29,11 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from .discretization import Discretization
-from .errors import InvalidParameter, UnderConstrained
+from ..discretization.space import Discretization
+from ..errors import InvalidParameter, UnderConstrained
 from .loads import gravity_load, traction_load
-from .mass import consistent_mass, lumped_mass
-from .mesh import boundary_facets, validate_mesh
+from ..discretization.mass import consistent_mass, lumped_mass
+from ..geometry.mesh import boundary_facets, validate_mesh
 
 __all__ = ["Model"]
 

@@ -102,10 +102,10 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from .discretization import Discretization
-from .errors import InvalidParameter
-from .materials.base import lame_parameters
-from .mesh import signed_volumes
+from ..discretization.space import Discretization
+from ..errors import InvalidParameter
+from ..materials.base import lame_parameters
+from ..geometry.mesh import signed_volumes
 from .potential import Potential
 
 __all__ = [
@@ -577,7 +577,7 @@ class MassSpring:
     Examples
     --------
     >>> import fem_elastic as fe
-    >>> from fem_elastic.springs import MassSpring, lloyd_stiffness
+    >>> from fem_elastic.physics.springs import MassSpring, lloyd_stiffness
     >>> model = fe.Model(fe.beam_mesh(cells=(4, 1, 1)), density=1000.0,
     ...                  body=MassSpring(E=1e6, k_d=0.1), fixed="left")
     >>> springs = model.body_potential  # one spring per mesh edge

@@ -61,10 +61,10 @@ import logging
 import numpy as np
 import scipy.sparse as sp
 
-from .discretization import Discretization
+from ..discretization.space import Discretization
 from .elastic_body import ElasticPotential
-from .errors import InvalidParameter
-from .materials.svd import polar_rotation
+from ..errors import InvalidParameter
+from ..materials.svd import polar_rotation
 from .potential import Potential
 
 __all__ = ["WarpedStiffness"]
@@ -312,12 +312,12 @@ class WarpedStiffness(Potential):
         >>> bool(np.abs(w.apply(x, spin)).max() < 1e-6)
         True
 
-        For P1 with numba (:func:`fem_elastic.fused.available`) one fused pass
-        over the elements computes it (:func:`fem_elastic.fused.warped_apply`);
+        For P1 with numba (:func:`fem_elastic.discretization.fused.available`) one fused pass
+        over the elements computes it (:func:`fem_elastic.discretization.fused.warped_apply`);
         otherwise, and for P2, batched numpy products do (the reference).
         """
         if self.space.order == 1:
-            from . import fused
+            from ..discretization import fused
 
             if fused.available():
                 return fused.warped_apply(self, x, v)
@@ -362,7 +362,7 @@ class WarpedStiffness(Potential):
         >>> import numpy as np
         >>> import fem_elastic as fe
         >>> from fem_elastic.discretization import Discretization
-        >>> from fem_elastic.elastic_body import ElasticPotential
+        >>> from fem_elastic.physics.elastic_body import ElasticPotential
         >>> space = Discretization(fe.beam_mesh(cells=(2, 1, 1)), order=1)
         >>> g, K = WarpedStiffness(space, fe.Corotated(E=1e6, nu=0.3)).linearize(space.X)
         >>> K_lin = ElasticPotential(fe.LinearElastic(E=1e6, nu=0.3), space).hessian(space.X)

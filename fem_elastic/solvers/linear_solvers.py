@@ -23,7 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .errors import FemElasticError, InvalidParameter, NotConverged
+from ..errors import FemElasticError, InvalidParameter, NotConverged
 
 __all__ = [
     "LinearSolve", "DirectSolver", "AMGSolver", "AutoSolver", "SingularMatrix", "LinearSolverFailed",

@@ -38,7 +38,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .errors import InvalidParameter, UnderConstrained
+from ..errors import InvalidParameter, UnderConstrained
 
 __all__ = ["natural_frequencies", "max_frequency", "critical_time_step", "modal_critical_time_step"]
 

@@ -1,6 +1,6 @@
 """Static equilibrium: minimise the total potential energy.
 
-``solve_static`` runs Newton's method (:mod:`fem_elastic.newton`) on
+``solve_static`` runs Newton's method (:mod:`fem_elastic.solvers.newton`) on
 Pi(x) = E_body(x) - f_ext . (x - X). When the full load cannot be reached
 from the rest state in one go (Newton stalls, or the line search finds only
 inverted states), the load is applied in increments, each started from the
@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import InvalidParameter, NotConverged
+from ..errors import InvalidParameter, NotConverged
 from .newton import newton_minimize
 
 __all__ = ["StaticResult", "solve_static"]

@@ -24,7 +24,7 @@ Problems and references
     levels are present).
 ``large_deflection`` (same beam)
     Tip deflection under a dead tip load with ``alpha = P L^2 / (E I)`` of
-    order 1, against the exact elastica (:func:`fem_elastic.analytic.elastica_tip`).
+    order 1, against the exact elastica (:func:`fem_elastic.physics.analytic.elastica_tip`).
     Rotations are large, strains small (alpha h / (2 L)): the geometrically
     nonlinear bodies reduce to the elastica; linear FEM cannot (it predicts
     alpha / 3) and is included to show by how much it fails.
@@ -85,7 +85,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analytic import RectangularCantilever, elastica_tip
+from ..physics.analytic import RectangularCantilever, elastica_tip
 from ..errors import InvalidParameter
 from .executor import Case, run_sweep
 from .report import (
@@ -311,7 +311,7 @@ def _tip_weights(model, axis: int) -> np.ndarray:
     The nodal forces of a unit traction on "right", over the face's area: the
     work-conjugate of a uniform end load (for P2 it weighs the mid-edge nodes too).
     """
-    from ..loads import traction_load
+    from ..physics.loads import traction_load
 
     t = np.zeros(3)
     t[axis] = 1.0
@@ -965,7 +965,7 @@ def _linearized_lines(rows):
             if slope < 0.5 and rs[0]["body"] == "corotated" and rs[0]["order"] == 2:
                 text += (": it hardly shrinks with dt because on quadratic tets stiffness warping, which "
                          "LinearizedImplicitEuler uses for a corotated body, takes one rotation per element and "
-                         "only approximates the corotated force (fem_elastic.stiffness_warping): a different "
+                         "only approximates the corotated force (fem_elastic.physics.stiffness_warping): a different "
                          "force, not a different time step")
         ie = [r for r in rs if finite(r.get("ie_error_vs_reference"))]
         if ie:
@@ -1131,7 +1131,7 @@ def write_report(rows, path, *, quick: bool, wall_time: float | None = None, n_r
     -------
     pathlib.Path
     """
-    from ..io import write_text_atomic
+    from ..files import write_text_atomic
 
     n_ok = sum(r.get("status") == "ok" for r in rows)
     status = {}

@@ -329,7 +329,7 @@ def _repair(path: Path) -> None:
     rows, clean = _parse_lines(text, path)
     if clean:
         return
-    from ..io import write_text_atomic
+    from ..files import write_text_atomic
 
     logger.warning("%s: rewriting it with its %d complete rows", path, len(rows))
     write_text_atomic(path, "".join(_dumps(r) + "\n" for r in rows))
@@ -395,7 +395,7 @@ def write_csv(rows, path) -> Path:
     import csv
     import io
 
-    from ..io import write_text_atomic
+    from ..files import write_text_atomic
 
     rows = list(rows)
     columns: dict[str, None] = {}

@@ -183,7 +183,7 @@ def save_figure(fig, path) -> Path:
 
     The format follows ``path``'s suffix (``.png``, ``.pdf``, ``.svg``).
     """
-    from ..io import _atomic_write
+    from ..files import _atomic_write
 
     path = Path(path)
     fmt = path.suffix.lstrip(".") or "png"

@@ -85,11 +85,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import integrators as _integrators
+from ..dynamics import integrators as _integrators
 from ..errors import Diverged, FemElasticError, InvalidMesh, InvalidParameter, NotConverged
-from ..mesh import _signed_volumes
-from ..modal import critical_time_step, max_frequency
-from ..simulate import simulate
+from ..geometry.mesh import _signed_volumes
+from ..solvers.modal import critical_time_step, max_frequency
+from ..dynamics.simulate import simulate
 from . import stability_cases as sc
 from .executor import Case, run_sweep
 from .report import StudyResult, finish_study
@@ -970,7 +970,7 @@ def write_report(rows, path, *, quick: bool = False, wall_time: float | None = N
     -------
     pathlib.Path
     """
-    from ..io import write_text_atomic
+    from ..files import write_text_atomic
     from .report import markdown_table
 
     lines = [f"# Stability study{' (quick)' if quick else ''}", ""]

@@ -47,15 +47,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..contact import Ground
-from ..driven import Translate, Twist
-from ..elastic_body import ElasticBody
+from ..physics.contact import Ground
+from ..physics.driven import Translate, Twist
+from ..physics.elastic_body import ElasticBody
 from ..errors import InvalidParameter
 from ..materials import Corotated, LinearElastic, NeoHookean, StVK
-from ..mesh import _signed_volumes, beam_mesh
-from ..model import Model
-from ..springs import SPRING_POISSON_RATIO, MassSpring
-from ..state import State
+from ..geometry.mesh import _signed_volumes, beam_mesh
+from ..physics.model import Model
+from ..physics.springs import SPRING_POISSON_RATIO, MassSpring
+from ..dynamics.state import State
 
 __all__ = [
     "BODIES",

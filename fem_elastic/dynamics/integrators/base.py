@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InvalidParameter
+from ...errors import InvalidParameter
 from ..state import State
 
 __all__ = ["Integrator", "StepStats", "check_dt", "check_state"]

@@ -83,7 +83,7 @@ import numbers
 
 import numpy as np
 
-from ..errors import Diverged, InvalidParameter
+from ...errors import Diverged, InvalidParameter
 from ..state import State
 from .base import Integrator, StepStats, check_dt, check_state
 
@@ -280,7 +280,7 @@ class _Explicit(Integrator):
 
     def _estimate(self, model, state, h_cap) -> None:
         """Critical time step at ``state.x``; the sub-step limit becomes safety x it, at most h_cap."""
-        from ..modal import critical_time_step
+        from ...solvers.modal import critical_time_step
 
         dt_crit = critical_time_step(model, self._plain(), x=state.x)
         if dt_crit == 0.0:
@@ -452,7 +452,7 @@ class ExplicitEuler(_Explicit):
     """Forward Euler: ``x1 = x + h v``, ``v1 = v + h a(x, v)`` (first order).
 
     Parameters are those of the explicit schemes' sub-stepping (see
-    :mod:`fem_elastic.integrators.explicit`): ``substep``, ``safety``,
+    :mod:`fem_elastic.dynamics.integrators.explicit`): ``substep``, ``safety``,
     ``recheck_every``, ``max_substeps``. Sub-stepping needs damping: on an
     undamped body explicit Euler has no stable step.
 
@@ -482,7 +482,7 @@ class SymplecticEuler(_Explicit):
     Stable up to ``h = 2 / omega_max`` on an undamped body; its energy
     error stays bounded (it is symplectic), and it conserves linear and
     angular momentum exactly. With ``substep=True`` any dt is taken in
-    stable sub-steps (see :mod:`fem_elastic.integrators.explicit`).
+    stable sub-steps (see :mod:`fem_elastic.dynamics.integrators.explicit`).
 
     Examples
     --------

@@ -2,7 +2,7 @@
 
 Implicit (backward) Euler, ``v1 = v + h M^-1 f(x1, v1)``, ``x1 = x + h v1``,
 is the minimiser of the incremental potential (see
-:mod:`fem_elastic.integrators.incremental`)
+:mod:`fem_elastic.dynamics.integrators.incremental`)
 
     G(x) = 1/(2 h^2) ||x - (x_n + h v_n)||_M^2 + Pi(x) + 1/(2h) ||x - x_n||_C^2,
 
@@ -25,10 +25,10 @@ import time
 
 import numpy as np
 
-from ..errors import Diverged, InvalidParameter
-from ..linear_solvers import AutoSolver
-from ..materials import Corotated
-from ..newton import NewtonResult, _direction, newton_minimize
+from ...errors import Diverged, InvalidParameter
+from ...solvers.linear_solvers import AutoSolver
+from ...materials import Corotated
+from ...solvers.newton import NewtonResult, _direction, newton_minimize
 from ..state import State
 from .base import Integrator, StepStats, check_dt, check_state
 from .incremental import IncrementalPotential
@@ -131,7 +131,7 @@ class ImplicitEuler(_Implicit):
         When Newton fails, the step is retried as two halves, recursively
         up to this many times; then :class:`fe.Diverged` is raised.
     project : bool
-        PSD-projected Hessian away from the solution (see :mod:`fem_elastic.newton`).
+        PSD-projected Hessian away from the solution (see :mod:`fem_elastic.solvers.newton`).
     linear_solver : object, optional
         ``fe.DirectSolver()``, ``fe.AMGSolver()``, default ``fe.AutoSolver()``.
 

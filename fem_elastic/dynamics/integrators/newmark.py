@@ -6,7 +6,7 @@
 Second order, unconditionally stable, and for a linear undamped system it
 conserves the energy exactly (it is the trapezoidal rule). The new
 positions minimise the incremental potential with ``k = h/2`` and target
-``y = x + h v + h^2/4 a`` (:mod:`fem_elastic.integrators.incremental`), so the
+``y = x + h v + h^2/4 a`` (:mod:`fem_elastic.dynamics.integrators.incremental`), so the
 same Newton solver serves it.
 
 The scheme needs the acceleration of the current state. The integrator
@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse.linalg as spla
 
-from ..errors import InvalidParameter
+from ...errors import InvalidParameter
 from .implicit import ImplicitEuler
 from .incremental import IncrementalPotential
 

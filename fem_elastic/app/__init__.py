@@ -1,0 +1,19 @@
+"""The application: scene files, running them, their output, renders and the command line.
+
+Holds the TOML scene format (:mod:`~fem_elastic.app.scene` and its schema),
+the runner that simulates a scene's variants and writes what it asks for
+(:mod:`~fem_elastic.app.runner`), the VTU series and summaries
+(:mod:`~fem_elastic.app.vtu`, :mod:`~fem_elastic.app.output`), off-screen
+rendering through pyvista (:mod:`~fem_elastic.app.render`, the only module that
+imports it) and the ``fem-elastic`` command (:mod:`~fem_elastic.app.cli`). The
+top layer: it may import every layer below, and nothing below imports it.
+"""
+
+from .output import SeriesWriter, write_summary
+from .scene import BuiltRun, Scene, SceneError, load_scene, parse_scene, scene_help
+from .vtu import SeriesData, read_series, write_pvd, write_vtu_frame
+
+__all__ = [
+    "BuiltRun", "Scene", "SceneError", "SeriesData", "SeriesWriter", "load_scene", "parse_scene",
+    "read_series", "scene_help", "write_pvd", "write_summary", "write_vtu_frame",
+]

@@ -1,0 +1,34 @@
+"""Dynamics: time integration of a model, from one step to a whole recorded run.
+
+Holds the :class:`~fem_elastic.dynamics.state.State` ``(x, v, t)``, the
+integrators (:mod:`~fem_elastic.dynamics.integrators`: each a small object with
+``step(model, state, dt) -> State``), :func:`~fem_elastic.dynamics.simulate.simulate`
+(a loop that hands every accepted step to observers:
+:mod:`~fem_elastic.dynamics.observers`), the recorded
+:class:`~fem_elastic.dynamics.trajectory.Trajectory` and checkpoints. It may
+import :mod:`fem_elastic.solvers`, :mod:`fem_elastic.physics` and the layers
+below, never :mod:`fem_elastic.study` or :mod:`fem_elastic.app`.
+"""
+
+from .checkpoint import Checkpoint, load_checkpoint
+from .integrators import (
+    RK4,
+    ExplicitEuler,
+    ImplicitEuler,
+    Integrator,
+    LinearizedImplicitEuler,
+    Midpoint,
+    Newmark,
+    StepStats,
+    SymplecticEuler,
+)
+from .observers import Observer  # noqa: F401
+from .simulate import StabilityWarning, simulate
+from .state import State
+from .trajectory import Trajectory
+
+__all__ = [
+    "Checkpoint", "ExplicitEuler", "ImplicitEuler", "Integrator", "LinearizedImplicitEuler",
+    "Midpoint", "Newmark", "Observer", "RK4", "StabilityWarning", "State", "StepStats",
+    "SymplecticEuler", "Trajectory", "load_checkpoint", "simulate",
+]

@@ -1,0 +1,94 @@
+"""Files written atomically: a crash or Ctrl-C leaves the old file or the new one, never half.
+
+Every file the package writes (meshes, VTU frames, summaries, checkpoints,
+study results) goes through :func:`_atomic_write`: a temporary file in the
+same directory, flushed and fsync'ed, then ``os.replace`` over the final
+name, then the directory fsync'ed so the rename is durable. A foundation
+module beside :mod:`fem_elastic.errors`: it imports nothing of the package.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+__all__ = ["write_text_atomic"]
+
+
+def _new_file_mode(path: Path) -> int:
+    """Mode a plain ``open(path, "w")`` would give: the old file's, else 0666 & ~umask."""
+    if path.exists():
+        return path.stat().st_mode & 0o777
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
+
+def _fsync_directory(directory: Path) -> None:
+    """Make a rename in ``directory`` durable (POSIX; a no-op where unsupported)."""
+    try:
+        fd = os.open(directory, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _atomic_write(path: Path, write) -> Path:
+    """Call ``write(tmp_path)`` on a temporary file beside ``path``, then move it over ``path``.
+
+    The temporary file is fsync'ed before ``os.replace`` so that the rename
+    never exposes a file whose bytes are not on disk yet; on any error
+    (KeyboardInterrupt included) it is removed and ``path`` is left as it was.
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        write(tmp)
+        with open(tmp, "rb+") as fh:
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, _new_file_mode(path))  # mkstemp makes it owner-only (0600)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    _fsync_directory(path.parent)
+    return path
+
+
+def write_text_atomic(path, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Destination; its directory must exist.
+    text : str
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> from fem_elastic.files import write_text_atomic
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     print(write_text_atomic(pathlib.Path(tmp) / "a.txt", "hi").read_text())
+    hi
+    """
+
+    def write(tmp):
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(text)
+
+    return _atomic_write(Path(path), write)

@@ -1,0 +1,22 @@
+"""Solvers: Newton's method with line search, linear solvers, the static solve, modal analysis.
+
+Holds the minimiser every implicit computation shares
+(:mod:`~fem_elastic.solvers.newton`: Newton with backtracking line search on
+any energy with a gradient and a Hessian), the sparse linear solvers (direct,
+AMG-CG, automatic choice), :func:`~fem_elastic.solvers.static.solve_static`
+and the eigenvalue problems (:mod:`~fem_elastic.solvers.modal`: natural
+frequencies, critical time steps). They see a model only through its energy,
+gradient, Hessian, mass and held DOFs. It may import :mod:`fem_elastic.physics`
+and the layers below it, never :mod:`fem_elastic.dynamics` or above.
+"""
+
+from .linear_solvers import AMGSolver, AutoSolver, DirectSolver, LinearSolverFailed, SingularMatrix
+from .modal import critical_time_step, max_frequency, natural_frequencies
+from .newton import NewtonResult, newton_minimize
+from .static import StaticResult, solve_static
+
+__all__ = [
+    "AMGSolver", "AutoSolver", "DirectSolver", "LinearSolverFailed", "NewtonResult",
+    "SingularMatrix", "StaticResult", "critical_time_step", "max_frequency",
+    "natural_frequencies", "newton_minimize", "solve_static",
+]
