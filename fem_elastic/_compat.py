@@ -23,7 +23,7 @@ MOVED: dict[str, tuple[str, ...]] = {
     "analytic": ("physics.analytic",),
     "checkpoint": ("dynamics.checkpoint",),
     "cli": ("app.cli",),
-    "contact": ("physics.contact",),
+    "contact": ("physics.contact", "physics.obstacles"),
     "damping": ("physics.damping",),
     "driven": ("physics.driven",),
     "elastic_body": ("physics.elastic_body",),
@@ -77,9 +77,11 @@ class _MovedModule(types.ModuleType):
             if hasattr(module, name):
                 if not self._warned:
                     self._warned = True
+                    public = name in getattr(sys.modules.get(_PACKAGE), "__all__", ())
                     warnings.warn(
-                        f"{self.__name__} is deprecated: import {name} from {target} (or use "
-                        f"fem_elastic.{name} where it is public); the old path goes in 0.3.",
+                        f"{self.__name__} is deprecated: import {name} from {target}"
+                        + (f" (or use fem_elastic.{name})" if public else "")
+                        + "; the old path goes in 0.3.",
                         DeprecationWarning, stacklevel=2,
                     )
                 return getattr(module, name)
@@ -122,7 +124,23 @@ def moved_module(old: str) -> _MovedModule:
     return module
 
 
+class _Package(types.ModuleType):
+    """The package module, keeping its public names when an old module path of the same name loads.
+
+    Importing a submodule sets it as an attribute of its parent: ``import
+    fem_elastic.simulate`` (the old path) would replace the function
+    ``fem_elastic.simulate`` by the alias module. An alias never replaces a
+    name the package already has.
+    """
+
+    def __setattr__(self, name, value):
+        if isinstance(value, _MovedModule) and name in self.__dict__:
+            return
+        super().__setattr__(name, value)
+
+
 def install() -> None:
-    """Put the finder of old module paths on ``sys.meta_path`` (once)."""
+    """Put the finder of old module paths on ``sys.meta_path`` (once), and guard the package's names."""
     if not any(isinstance(f, _MovedFinder) for f in sys.meta_path):
         sys.meta_path.append(_MovedFinder())
+    sys.modules[_PACKAGE].__class__ = _Package

@@ -252,7 +252,7 @@ BAD_INPUTS: list[BadInput] = [
     BadInput("gravity with two components", lambda tmp: _model(gravity=(0.0, -9.81)), IP,
              "gravity must be three finite numbers (m/s^2)", "e.g. (0.0, 0.0, -9.81)"),
     BadInput("an obstacle class instead of an instance (ground=fe.Ground)", lambda tmp: _model(ground=fe.Ground),
-             IP, "got <class 'fem_elastic.physics.contact.Ground'>", "ground must be an obstacle such as fe.Ground(z=0.0)"),
+             IP, "got <class 'fem_elastic.physics.obstacles.Ground'>", "ground must be an obstacle such as fe.Ground(z=0.0)"),
     BadInput("a ground through the body's start (penalty contact)",
              lambda tmp: _model(fixed=None, gravity=(0.0, 0.0, -9.81), ground=fe.Ground(z=0.05)), IP,
              "node(s) of the reference configuration start inside Ground(",

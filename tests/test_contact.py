@@ -6,15 +6,10 @@ import numpy as np
 import pytest
 
 import fem_elastic as fe
-from fem_elastic.physics.contact import (
-    BarrierContact,
-    Box,
-    Ground,
-    PenaltyContact,
-    Sphere,
-)
 from fem_elastic.discretization import Discretization
 from fem_elastic.errors import InvalidParameter
+from fem_elastic.physics.contact import BarrierContact, PenaltyContact
+from fem_elastic.physics.obstacles import Box, Ground, Sphere
 from fem_elastic.solvers.newton import newton_minimize
 
 G = 9.81  # m/s^2, the default design gravity of the contact stiffness

@@ -17,6 +17,7 @@ import pytest
 import fem_elastic as fe
 from fem_elastic.study import stability as st
 from fem_elastic.study import stability_cases as sc
+from fem_elastic.study import stability_run as sr
 
 # The subset of the quick study that the tests run.
 _IDS = {
@@ -95,9 +96,9 @@ def test_inverted_scene_starts_with_inverted_tets():
 
 
 def test_classify():
-    assert st._classify(fe.Diverged("x", reason="Newton did not converge (line search failed)")) == "newton failed"
-    assert st._classify(fe.Diverged("x", reason="non-finite positions or velocities")) == "diverged"
-    assert st._classify(fe.NotConverged("linear solver")) == "newton failed"
+    assert sr._classify(fe.Diverged("x", reason="Newton did not converge (line search failed)")) == "newton failed"
+    assert sr._classify(fe.Diverged("x", reason="non-finite positions or velocities")) == "diverged"
+    assert sr._classify(fe.NotConverged("linear solver")) == "newton failed"
 
 
 # --- the study's outputs --------------------------------------------------------------------

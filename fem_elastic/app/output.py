@@ -146,7 +146,7 @@ def _field_range(values: np.ndarray) -> tuple[float | None, float | None]:
 
 def _ground_info(model):
     """``{"kind": "plane", "z": ..}`` for a model's ground plane, or None."""
-    from ..physics.contact import Ground
+    from ..physics.obstacles import Ground
 
     for obstacle in getattr(model, "obstacles", ()):
         if isinstance(obstacle, Ground):

@@ -680,7 +680,7 @@ class Scene:
 
     def _terms(self):
         """Model keywords for the loads, ground, damping and driven boundaries that are declared."""
-        from ..physics.contact import Ground
+        from ..physics.obstacles import Ground
         from ..physics.damping import Rayleigh
         from ..physics.driven import Translate, Twist
 

@@ -12,12 +12,12 @@ modules; solvers and integrators see it only through the Potential protocol.
 """
 
 from .analytic import RectangularCantilever, elastica_tip
-from .contact import Box, Ground, Obstacle, Sphere
 from .damping import Rayleigh
 from .driven import Motion, Prescribed, Translate, Twist
 from .elastic_body import ElasticBody, ElasticPotential
 from .fields import CellFields, cell_fields, von_mises
 from .model import Model
+from .obstacles import Box, Ground, Obstacle, Sphere
 from .potential import LinearPotential, Potential
 from .springs import MassSpring, SpringPotential, lloyd_stiffness, van_gelder_stiffness
 from .stiffness_warping import WarpedStiffness

@@ -47,7 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..physics.contact import Ground
+from ..physics.obstacles import Ground
 from ..physics.driven import Translate, Twist
 from ..physics.elastic_body import ElasticBody
 from ..errors import InvalidParameter
