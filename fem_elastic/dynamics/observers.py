@@ -274,7 +274,7 @@ class CheckpointWriter(Observer):
             self.ckpt.write(self.snap, run.frames, run.stats, run.cuts)
 
     def on_interrupt(self, run) -> None:
-        if self.snap.step > self.ckpt.last_step:
+        if self.snap is not None and self.snap.step > self.ckpt.last_step:
             self.ckpt.write(self.snap, run.frames, run.stats, run.cuts)
             log.warning("interrupted: checkpoint after %d of %d steps (t = %.6g s) in %s; "
                         "resume=True continues from it", self.snap.step, run.n_steps,
