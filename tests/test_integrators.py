@@ -8,7 +8,7 @@ from skfem import MeshTet
 import fem_elastic as fe
 
 ALL = [fe.ExplicitEuler, fe.SymplecticEuler, fe.Midpoint, fe.RK4, fe.ImplicitEuler,
-       fe.LinearizedImplicitEuler, fe.Newmark]
+       fe.LinearizedImplicitEuler, fe.Newmark, fe.Trapezoid, fe.VelocityVerlet]
 
 
 # -- a single mass on a spring: one tet with three vertices held --------------------------
@@ -40,6 +40,8 @@ def oscillator():
         (fe.ImplicitEuler(), 1, (1 / 50, 1 / 100, 1 / 200)),
         (fe.LinearizedImplicitEuler(), 1, (1 / 50, 1 / 100, 1 / 200)),
         (fe.Newmark(), 2, (1 / 25, 1 / 50, 1 / 100)),
+        (fe.Trapezoid(), 2, (1 / 25, 1 / 50, 1 / 100)),
+        (fe.VelocityVerlet(), 2, (1 / 25, 1 / 50, 1 / 100)),
     ],
     ids=lambda p: getattr(p, "name", ""),
 )
@@ -137,7 +139,8 @@ def test_energy_behaviour_on_a_vibrating_beam(linear_beam):
 
 def test_free_body_conserves_momentum():
     """No gravity, nothing fixed: linear momentum is conserved by every scheme, angular
-    momentum exactly by symplectic Euler (x_{n+1} x m v_{n+1} = x_n x m v_{n+1})."""
+    momentum exactly by symplectic Euler (x_{n+1} x m v_{n+1} = x_n x m v_{n+1}) and velocity
+    Verlet (its kicks add no torque, its drift moves along the momentum)."""
     mesh = fe.beam_mesh(length=0.3, width=0.1, height=0.1, cells=(3, 1, 1))
     model = fe.Model(mesh, density=1000.0, body=fe.ElasticBody(fe.NeoHookean(E=1e5, nu=0.3)))
     rng = np.random.default_rng(0)
@@ -156,7 +159,7 @@ def test_free_body_conserves_momentum():
         # tolerance for the implicit ones (force residual 1e-8 relative)
         np.testing.assert_allclose(run.linear_momentum, np.broadcast_to(P0, run.linear_momentum.shape),
                                    atol=1e-7 * np.abs(P0).max(), err_msg=cls.__name__)
-        if cls is fe.SymplecticEuler:
+        if cls in (fe.SymplecticEuler, fe.VelocityVerlet):
             # exact in exact arithmetic; 20 steps of round-off on sums over 32 nodes
             np.testing.assert_allclose(run.angular_momentum,
                                        np.broadcast_to(L0, run.angular_momentum.shape),

@@ -51,6 +51,9 @@ def check_state(model, state) -> None:
 
 #: dt^2 below this is subnormal or zero: 1/dt^2 overflows or loses its precision.
 _DT2_MIN = np.finfo(float).tiny
+_DT_MIN = math.sqrt(_DT2_MIN)
+#: dt^2 above this overflows to inf (and dt^2 times a stiffness long before).
+_DT_MAX = math.sqrt(np.finfo(float).max) / 1e4
 
 
 def check_dt(dt) -> float:
@@ -59,10 +62,15 @@ def check_dt(dt) -> float:
         raise InvalidParameter(
             f"the time step dt must be a finite number > 0 (s), got {dt!r}; e.g. dt=1e-3."
         )
-    if float(dt) ** 2 < _DT2_MIN:
+    if float(dt) < _DT_MIN:
         raise InvalidParameter(
             f"the time step dt = {dt!r} s is too small: implicit schemes divide by dt^2, which "
-            f"underflows below {math.sqrt(_DT2_MIN):.0e} s; use a dt of at least that (e.g. dt=1e-6)."
+            f"underflows below {_DT_MIN:.0e} s; use a dt of at least that (e.g. dt=1e-6)."
+        )
+    if float(dt) > _DT_MAX:
+        raise InvalidParameter(
+            f"the time step dt = {dt!r} s is too large: the schemes use dt^2, which overflows "
+            f"above {_DT_MAX:.0e} s; give dt in seconds, a fraction of the run's duration (e.g. dt=1e-3)."
         )
     return float(dt)
 

@@ -45,7 +45,8 @@ many sub-steps, and ``dt_crit`` re-estimated there, when
   (it is then indefinite), so a symplectic Euler step is also rejected
   when its ``KE + Pi`` grows by more than the swing of a stable mode allows,
   ``(1 + r) / (1 - r) - 1 + ENERGY_GROWTH`` times the scale, with
-  ``r = h / dt_crit``.
+  ``r = h / dt_crit``. Velocity Verlet (:mod:`fem_elastic.dynamics.integrators.verlet`)
+  shares this machinery and is judged the same way by its own modified energy.
 
 Every failed attempt is recorded in ``last_stats.cuts`` as ``(t, dt_sub,
 reason)``; ``last_stats.dt_cuts`` counts them and ``last_stats.substeps`` is
@@ -331,8 +332,16 @@ class _Explicit(Integrator):
                 g = model.gradient(state.x)
                 stats.gradient_evaluations += 1
                 self._gradient = (state.x, g)
-            vg = float(state.v @ g)
+            vg = self._energy_term(model, state, g)
         return model.kinetic_energy(state.v, "lumped"), model.energy(state.x), vg
+
+    def _energy_term(self, model, state, g) -> float:
+        """The term of the modified energy from dPi/dx ``g`` at ``state``: here ``v . g`` (W)."""
+        return float(state.v @ g)
+
+    def _swing(self, r) -> float:
+        """Most ``KE + Pi`` of a stable mode over its modified energy, at ``r = h / dt_crit``."""
+        return (1.0 + r) / (1.0 - r) if r < 1.0 else math.inf  # safety = 1: no bound
 
     def _judged(self, energies, hs) -> float:
         """The energy a step is judged by (J): kinetic plus potential, or the modified energy."""
@@ -351,8 +360,8 @@ class _Explicit(Integrator):
             # symplectic Euler conserves its modified energy exactly on a linear body even where
             # unstable (it is then indefinite), so the blow-up shows only in KE + Pi; a stable
             # mode swings that by (1 + r) / (1 - r) at most, r = h w / 2 = hs / dt_crit
-            r = hs / self._dt_crit
-            swing = (1.0 + r) / (1.0 - r) if r < 1.0 else math.inf  # safety = 1: no bound
+            # (velocity Verlet: 1 / (1 - r^2), see _swing)
+            swing = self._swing(hs / self._dt_crit)
             e0, e1 = start[0] + start[1], end[0] + end[1]
             step_scale = self._energy_scale(model, start[0], start[1])
             if e1 > e0 + (swing - 1.0 + ENERGY_GROWTH) * step_scale:
@@ -433,9 +442,11 @@ class _Explicit(Integrator):
             return None, "the energy at the end of the step is not finite (an inverted element)"
         ke, vg, g = model.kinetic_energy(s.v, "lumped"), None, None
         if self._modified_energy:
-            g = model.gradient(s.x)
-            stats.gradient_evaluations += 1
-            vg = float(s.v @ g)
+            at, g = self._gradient
+            if at is not s.x:  # unless the scheme's last sub-step took it there (velocity Verlet)
+                g = model.gradient(s.x)
+                stats.gradient_evaluations += 1
+            vg = self._energy_term(model, s, g)
         end = (ke, pe, vg)
         if judge_energy:
             why = self._judge(model, start, end, hs, anchor)

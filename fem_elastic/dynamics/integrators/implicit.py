@@ -164,6 +164,10 @@ class ImplicitEuler(_Implicit):
     def _velocity(self, state, x1, h):
         return (x1 - state.x) / h
 
+    def _prediction(self, G, state, h):
+        """The first guess of Newton (a new array), tried against the old positions: G's target y."""
+        return G.y.copy()
+
     def _try(self, model, state, h, stats):
         free, dofs, xc, vc = self._start(model, state, h)
         G = self._objective(model, state, h)
@@ -171,7 +175,7 @@ class ImplicitEuler(_Implicit):
         # incremental potential. Starting no higher than x_n means the minimiser Newton reaches
         # has G(x_{n+1}) <= G(x_n), the discrete energy bound of implicit Euler; from y alone a
         # stiff body at a large dt can land in an inverted basin and gain energy.
-        x0 = G.y.copy()
+        x0 = self._prediction(G, state, h)
         x0[dofs] = xc
         x_old = state.x.copy()
         x_old[dofs] = xc
