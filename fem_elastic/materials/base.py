@@ -1,4 +1,4 @@
-"""Common base of the hyperelastic materials.
+"""Common base of the hyperelastic materials, and the elastic constants they are built from.
 
 Conventions (used by every material module)
 -------------------------------------------
@@ -8,20 +8,30 @@ P : (3, 3, ...) first Piola-Kirchhoff stress, ``P = dpsi_dF``, in Pa.
 C : (3, 3, 3, 3, ...) the linearization ``C[i, j, k, l] = dP_ij / dF_kl`` (Pa).
 J : det F.
 psi : strain-energy density per unit reference volume (J/m^3 = Pa).
-mu, lam : Lame parameters (Pa), derived from Young's modulus E (Pa) and
-    Poisson's ratio nu (dimensionless).
+mu, lam : Lame parameters (Pa): the shear modulus and the first Lame parameter.
+K : bulk modulus (Pa), ``lam + 2/3 mu``.
+
+Every material is given by exactly one pair of elastic constants: Young's
+modulus E (Pa) and Poisson's ratio nu, the Lame parameters (mu, lam), or the
+shear and bulk moduli (mu, K). :func:`elastic_constants` checks the pair and
+converts it into all the others; it is the one place where these conversions
+are written.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from ..errors import InvalidParameter
 
-__all__ = ["Material", "lame_parameters"]
+__all__ = ["Material", "ElasticConstants", "elastic_constants", "lame_parameters", "PAIRS_HELP"]
+
+#: The allowed ways to give a material's stiffness, as error messages name them.
+PAIRS_HELP = "exactly one pair of (E, nu), (mu, lam) or (mu, K), e.g. E=1e6, nu=0.45 or mu=3.4e5, lam=3.1e6"
 
 
 def lame_parameters(E: float, nu: float) -> tuple[float, float]:
@@ -51,18 +61,129 @@ def lame_parameters(E: float, nu: float) -> tuple[float, float]:
     return mu, lam
 
 
+class ElasticConstants(NamedTuple):
+    """Every elastic constant of an isotropic material, and the pair it was given by.
+
+    Attributes
+    ----------
+    E : float
+        Young's modulus (Pa), as given when ``given == ("E", "nu")``.
+    nu : float
+        Poisson's ratio, as given when ``given == ("E", "nu")``.
+    mu : float
+        Shear modulus (Pa).
+    lam : float
+        First Lame parameter (Pa).
+    K : float
+        Bulk modulus ``lam + 2/3 mu`` (Pa).
+    given : tuple of str
+        The pair the material was built from: ``("E", "nu")``, ``("mu", "lam")``
+        or ``("mu", "K")``.
+    """
+
+    E: float
+    nu: float
+    mu: float
+    lam: float
+    K: float
+    given: tuple
+
+
+def elastic_constants(E=None, nu=None, *, mu=None, lam=None, K=None,
+                      who: str = "a material") -> ElasticConstants:
+    """Check one pair of elastic constants and convert it into all the others.
+
+    Exactly one pair must be given: (E, nu), (mu, lam) or (mu, K). Any other
+    combination (two pairs, a lone value, E with lam, ...) and any value out of
+    its range is :class:`~fem_elastic.errors.InvalidParameter`, whose message
+    names the allowed pairs. The ranges are those of a stable isotropic solid:
+    ``mu > 0`` and ``K > 0`` (equivalently ``E > 0`` and ``-1 < nu < 0.5``).
+
+    Parameters
+    ----------
+    E : float, optional
+        Young's modulus (Pa), > 0.
+    nu : float, optional
+        Poisson's ratio, -1 < nu < 0.5.
+    mu : float, optional
+        Shear modulus (Pa), > 0.
+    lam : float, optional
+        First Lame parameter (Pa), > -2/3 mu (it may be negative: auxetic solids).
+    K : float, optional
+        Bulk modulus (Pa), > 0.
+    who : str
+        What is being built, for the messages (e.g. ``"NeoHookean"``).
+
+    Returns
+    -------
+    ElasticConstants
+        ``(E, nu, mu, lam, K, given)``. From (E, nu), ``mu`` and ``lam`` are
+        :func:`lame_parameters` bit for bit; a given mu, lam or K is returned as given.
+
+    Examples
+    --------
+    >>> c = elastic_constants(mu=4.0e5, lam=4.0e5)
+    >>> round(c.E), c.nu, c.given
+    (1000000, 0.25, ('mu', 'lam'))
+    >>> round(elastic_constants(mu=4.0e5, K=2.0e6 / 3.0).lam)
+    400000
+    >>> elastic_constants(E=1e6, mu=4e5)
+    Traceback (most recent call last):
+    ...
+    fem_elastic.errors.InvalidParameter: a material got E and mu: give exactly one pair of (E, nu), (mu, lam) or (mu, K), e.g. E=1e6, nu=0.45 or mu=3.4e5, lam=3.1e6.
+    """
+    values = {"E": E, "nu": nu, "mu": mu, "lam": lam, "K": K}
+    given = tuple(name for name, value in values.items() if value is not None)
+    if given not in (("E", "nu"), ("mu", "lam"), ("mu", "K")):
+        got = "no elastic constant" if not given else " and ".join(given)
+        raise InvalidParameter(f"{who} got {got}: give {PAIRS_HELP}.")
+    for name in given:
+        _check_real(name, values[name])
+    if given == ("E", "nu"):
+        mu_, lam_ = lame_parameters(E, nu)
+        return ElasticConstants(E, nu, mu_, lam_, E / (3.0 * (1.0 - 2.0 * nu)), given)
+    if not mu > 0:
+        raise InvalidParameter(
+            f"the shear modulus mu must be > 0 Pa, got mu = {mu!r} ({who}). "
+            "Pass it in pascals, e.g. mu=3.4e5 for a soft rubber, mu=8e10 for steel."
+        )
+    if given == ("mu", "lam"):
+        K_ = lam + 2.0 * mu / 3.0
+        if not (K_ > 0 and math.isfinite(K_)):
+            raise InvalidParameter(
+                f"the first Lame parameter lam must be > -2/3 mu = {-2.0 * mu / 3.0!r} Pa, got "
+                f"lam = {lam!r} ({who}): the bulk modulus K = lam + 2/3 mu must be positive "
+                "(nu > -1) for the solid to resist compression."
+            )
+        E_ = mu * (3.0 * lam + 2.0 * mu) / (lam + mu)
+        nu_ = lam / (2.0 * (lam + mu))
+        return ElasticConstants(E_, nu_, mu, lam, K_, given)
+    if not (K > 0 and math.isfinite(K - 2.0 * mu / 3.0)):
+        raise InvalidParameter(
+            f"the bulk modulus K must be > 0 Pa, got K = {K!r} ({who}): a solid of K <= 0 does not "
+            "resist compression. Pass it in pascals, e.g. K=1e9 for a nearly incompressible rubber."
+        )
+    E_ = 9.0 * K * mu / (3.0 * K + mu)
+    nu_ = (3.0 * K - 2.0 * mu) / (2.0 * (3.0 * K + mu))
+    return ElasticConstants(E_, nu_, mu, K - 2.0 * mu / 3.0, K, given)
+
+
+def _check_real(name, value) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise InvalidParameter(
+            f"{name} must be a real number, got {value!r} of type {type(value).__name__}."
+        )
+    try:
+        finite = math.isfinite(float(value))
+    except OverflowError:  # an int beyond the float range
+        finite = False
+    if not finite:
+        raise InvalidParameter(f"{name} must be finite, got {value!r}.")
+
+
 def _check_E_nu(E, nu) -> None:
     for name, value in (("E", E), ("nu", nu)):
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-            raise InvalidParameter(
-                f"{name} must be a real number, got {value!r} of type {type(value).__name__}."
-            )
-        try:
-            finite = math.isfinite(float(value))
-        except OverflowError:  # an int beyond the float range
-            finite = False
-        if not finite:
-            raise InvalidParameter(f"{name} must be finite, got {value!r}.")
+        _check_real(name, value)
     if E <= 0:
         raise InvalidParameter(
             f"Young's modulus E must be > 0 Pa, got E = {E!r}. "
@@ -80,9 +201,9 @@ def _check_E_nu(E, nu) -> None:
         )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False, repr=False)
 class Material:
-    """An isotropic hyperelastic material given by E (Pa) and nu.
+    """An isotropic hyperelastic material given by one pair of elastic constants.
 
     Subclasses implement ``psi``, ``dpsi_dF`` and ``d2psi_dF2`` on
     deformation gradients of shape ``(3, 3, ...)``, and ``d2psi_dF2_psd``,
@@ -91,27 +212,74 @@ class Material:
 
     Parameters
     ----------
-    E : float
+    E : float, optional
         Young's modulus (Pa), > 0.
-    nu : float
+    nu : float, optional
         Poisson's ratio, -1 < nu < 0.5.
+    mu : float, optional (keyword only)
+        Shear modulus (Pa), > 0.
+    lam : float, optional (keyword only)
+        First Lame parameter (Pa), > -2/3 mu.
+    K : float, optional (keyword only)
+        Bulk modulus (Pa), > 0.
+
+    Exactly one pair: (E, nu), (mu, lam) or (mu, K) (see
+    :func:`elastic_constants`); anything else is
+    :class:`~fem_elastic.errors.InvalidParameter`. The fields are always E and
+    nu (derived from the pair given), and ``mu``, ``lam``, ``K`` are there
+    whatever the pair; a given value is kept exactly. The repr shows the
+    pair given.
+
+    Examples
+    --------
+    >>> from fem_elastic.materials import NeoHookean
+    >>> NeoHookean(E=1e6, nu=0.25)
+    NeoHookean(E=1000000.0, nu=0.25)
+    >>> m = NeoHookean(mu=4e5, lam=4e5)
+    >>> m, round(m.E), m.nu
+    (NeoHookean(mu=400000.0, lam=400000.0), 1000000, 0.25)
     """
 
     E: float
     nu: float
 
+    def __init__(self, E=None, nu=None, *, mu=None, lam=None, K=None):
+        c = elastic_constants(E, nu, mu=mu, lam=lam, K=K, who=type(self).__name__)
+        object.__setattr__(self, "E", c.E)
+        object.__setattr__(self, "nu", c.nu)
+        self._set_constants(c)
+
     def __post_init__(self):
-        _check_E_nu(self.E, self.nu)
+        # run only by the dataclass-made __init__(E, nu) of a user's subclass
+        self._set_constants(elastic_constants(self.E, self.nu, who=type(self).__name__))
+
+    def _set_constants(self, c: ElasticConstants) -> None:
+        # private (underscored) attributes: checkpoints describe a material by its public ones
+        object.__setattr__(self, "_mu", c.mu)
+        object.__setattr__(self, "_lam", c.lam)
+        object.__setattr__(self, "_K", c.K)
+        object.__setattr__(self, "_given", c.given)
+
+    def __repr__(self) -> str:
+        given = getattr(self, "_given", ("E", "nu"))
+        values = {"E": self.E, "nu": self.nu, "mu": self.mu, "lam": self.lam, "K": self.K}
+        inner = ", ".join(f"{name}={values[name]!r}" for name in given)
+        return f"{type(self).__qualname__}({inner})"
 
     @property
     def mu(self) -> float:
         """Shear modulus (Pa)."""
-        return lame_parameters(self.E, self.nu)[0]
+        return self._mu
 
     @property
     def lam(self) -> float:
         """First Lame parameter (Pa)."""
-        return lame_parameters(self.E, self.nu)[1]
+        return self._lam
+
+    @property
+    def K(self) -> float:
+        """Bulk modulus ``lam + 2/3 mu`` (Pa)."""
+        return self._K
 
     # The four methods every material provides -------------------------------
     def psi(self, F: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract

@@ -34,7 +34,7 @@ __all__ = ["Corotated", "TWIST_EPS"]
 TWIST_EPS = 1e-6
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False, repr=False)
 class Corotated(IsotropicMaterial):
     """Fixed corotated material ``psi = mu ||F - R||^2 + lam/2 tr(R^T F - I)^2``.
 
@@ -47,6 +47,10 @@ class Corotated(IsotropicMaterial):
         Young's modulus (Pa), > 0.
     nu : float
         Poisson's ratio, -1 < nu < 0.5.
+    mu, lam, K : float, keyword only
+        Instead of (E, nu): the shear modulus and the first Lame parameter
+        (``mu=..., lam=...``) or the shear and bulk moduli (``mu=..., K=...``),
+        in Pa. Exactly one pair (see :func:`.base.elastic_constants`).
 
     Examples
     --------

@@ -23,7 +23,7 @@ from .base import Material, _flat, _overflow_to_inf
 __all__ = ["LinearElastic"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False, repr=False)
 class LinearElastic(Material):
     """Small-strain linear elasticity ``psi = mu eps:eps + lam/2 tr(eps)^2``, ``eps = sym(F) - I``.
 
@@ -38,6 +38,10 @@ class LinearElastic(Material):
         Young's modulus (Pa), > 0.
     nu : float
         Poisson's ratio, -1 < nu < 0.5.
+    mu, lam, K : float, keyword only
+        Instead of (E, nu): the shear modulus and the first Lame parameter
+        (``mu=..., lam=...``) or the shear and bulk moduli (``mu=..., K=...``),
+        in Pa. Exactly one pair (see :func:`.base.elastic_constants`).
 
     Examples
     --------

@@ -29,7 +29,7 @@ from .isotropic import PAIRS, IsotropicMaterial
 __all__ = ["NeoHookean"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False, repr=False)
 class NeoHookean(IsotropicMaterial):
     """Neo-Hookean material ``psi = mu/2 (I1 - 3) - mu ln J + lam/2 (ln J)^2``.
 
@@ -42,6 +42,10 @@ class NeoHookean(IsotropicMaterial):
         Young's modulus (Pa), > 0.
     nu : float
         Poisson's ratio, -1 < nu < 0.5.
+    mu, lam, K : float, keyword only
+        Instead of (E, nu): the shear modulus and the first Lame parameter
+        (``mu=..., lam=...``) or the shear and bulk moduli (``mu=..., K=...``),
+        in Pa. Exactly one pair (see :func:`.base.elastic_constants`).
 
     Examples
     --------

@@ -35,7 +35,7 @@ from .isotropic import PAIRS, IsotropicMaterial
 __all__ = ["StableNeoHookean"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False, repr=False)
 class StableNeoHookean(IsotropicMaterial):
     """Stable Neo-Hookean material of Smith, de Goes and Kim (2018).
 
@@ -48,6 +48,10 @@ class StableNeoHookean(IsotropicMaterial):
         Young's modulus (Pa), > 0.
     nu : float
         Poisson's ratio, -1 < nu < 0.5.
+    mu, lam, K : float, keyword only
+        Instead of (E, nu): the shear modulus and the first Lame parameter
+        (``mu=..., lam=...``) or the shear and bulk moduli (``mu=..., K=...``),
+        in Pa. Exactly one pair (see :func:`.base.elastic_constants`).
 
     Examples
     --------

@@ -23,7 +23,7 @@ from .isotropic import PAIRS, IsotropicMaterial
 __all__ = ["StVK"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False, repr=False)
 class StVK(IsotropicMaterial):
     """St. Venant-Kirchhoff material ``psi = mu E:E + lam/2 tr(E)^2``, ``E = (F^T F - I)/2``.
 
@@ -33,6 +33,10 @@ class StVK(IsotropicMaterial):
         Young's modulus (Pa), > 0.
     nu : float
         Poisson's ratio, -1 < nu < 0.5.
+    mu, lam, K : float, keyword only
+        Instead of (E, nu): the shear modulus and the first Lame parameter
+        (``mu=..., lam=...``) or the shear and bulk moduli (``mu=..., K=...``),
+        in Pa. Exactly one pair (see :func:`.base.elastic_constants`).
 
     Examples
     --------

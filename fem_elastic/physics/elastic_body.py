@@ -33,9 +33,13 @@ from ..errors import InvalidParameter
 from ..materials.base import Material
 from .potential import Potential
 
-__all__ = ["ElasticBody", "ElasticPotential"]
+__all__ = ["ElasticBody", "ElasticPotential", "FORMULATIONS"]
 
 log = logging.getLogger(__name__)
+
+#: The formulations an ElasticBody can use: the displacement element, and the
+#: mixed element of :mod:`fem_elastic.physics.mixed_body` (no volumetric locking).
+FORMULATIONS = ("displacement", "mixed")
 
 
 @dataclass(frozen=True)
@@ -49,17 +53,27 @@ class ElasticBody:
     order : {1, 2}
         1 for linear tets (4 nodes), 2 for quadratic tets (10 nodes). Linear
         tets lock in bending: prefer order 2 for thin, bending-dominated parts.
+    formulation : {"displacement", "mixed"}
+        ``"displacement"`` (default): the energy integrated at every quadrature
+        point. ``"mixed"``: an element-wise constant pressure and mean dilatation
+        condensed out (:class:`~fem_elastic.physics.mixed_body.MixedPotential`),
+        which does not lock as nu -> 0.5; needs ``order=2`` and a material with a
+        volumetric split (``fe.LinearElastic``, ``fe.NeoHookean``,
+        ``fe.StableNeoHookean``). The same energy under homogeneous deformation.
 
     Examples
     --------
     >>> import fem_elastic as fe
     >>> body = fe.ElasticBody(fe.NeoHookean(E=1e6, nu=0.45), order=2)
-    >>> body.order
-    2
+    >>> body.order, body.formulation
+    (2, 'displacement')
+    >>> fe.ElasticBody(fe.NeoHookean(E=1e6, nu=0.4999), order=2, formulation="mixed").formulation
+    'mixed'
     """
 
     material: Material
     order: int = 1
+    formulation: str = "displacement"
 
     def __post_init__(self):
         if not isinstance(self.material, Material):
@@ -68,9 +82,23 @@ class ElasticBody:
                 f"got {self.material!r}."
             )
         check_order(self.order)
+        if not isinstance(self.formulation, str) or self.formulation not in FORMULATIONS:
+            raise InvalidParameter(
+                f"formulation must be one of {', '.join(map(repr, FORMULATIONS))}, got "
+                f"{self.formulation!r}: 'mixed' for nearly incompressible bodies (nu close to "
+                "0.5), which lock in the displacement formulation."
+            )
+        if self.formulation == "mixed":
+            from .mixed_body import check_mixed  # mixed_body builds on ElasticPotential below
+
+            check_mixed(self.material, self.order)
 
     def build(self, space: Discretization) -> "ElasticPotential":
         """The body's energy on a discretization of matching order."""
+        if self.formulation == "mixed":
+            from .mixed_body import MixedPotential
+
+            return MixedPotential(self.material, space)
         return ElasticPotential(self.material, space)
 
 

@@ -32,8 +32,9 @@ import scipy.sparse as sp
 from ..discretization.space import Discretization
 from ..errors import InvalidParameter, UnderConstrained
 from .loads import gravity_load, traction_load
+from .supports import describe_rigid_modes, nodes_of, resolve_displacement, resolve_fixed
 from ..discretization.mass import consistent_mass, lumped_mass
-from ..geometry.mesh import boundary_facets, validate_mesh
+from ..geometry.mesh import validate_mesh
 
 __all__ = ["Model"]
 
@@ -51,11 +52,23 @@ class Model:
         Mass density (kg/m^3), > 0.
     body : ElasticBody
         The body's energy, e.g. ``fe.ElasticBody(fe.NeoHookean(E=1e6, nu=0.45), order=2)``.
-    fixed : str, sequence of str, array of int or bool, or None
+    fixed : str, sequence of str, array of int or bool, mapping, or None
         DOFs held at their reference position: a boundary name of the mesh
         (``"left"``), several names, vertex indices, or a boolean mask over
-        vertices. With P2 tets, the edge nodes of a fixed boundary (or of an
-        edge whose two vertices are fixed) are fixed too.
+        vertices, all three components held; or a mapping from any of these
+        to the components held, ``"x"``, ``"yz"``, ``"xyz"`` or a bool triple:
+        ``{"left": "x", "bottom": "z"}`` (rollers), ``{"left": "xyz", "front":
+        "z", "back": "z"}`` (plane strain). A mask or an index array (not
+        hashable) goes in a list of ``(where, components)`` pairs instead. With
+        P2 tets, the edge nodes of a fixed boundary (or of an edge whose two
+        vertices are fixed) are fixed too.
+    displacement : mapping or None
+        Prescribed displacements (m): ``{where: (ux, uy, uz)}`` with None for
+        a free component, e.g. ``{"right": (0.01, None, None)}``, or ``{where:
+        function}`` with ``function(X) -> (n, 3)`` the displacements of the
+        reference node positions ``X`` (n, 3) (NaN: free). A static solve ramps
+        them with the load factor; dynamics holds them from the first instant.
+        A component both fixed and prescribed is an error naming both.
     gravity : array_like or None
         Gravitational acceleration (m/s^2), e.g. ``(0, 0, -9.81)``. None
         builds no gravity term at all.
@@ -85,7 +98,7 @@ class Model:
 
     def __init__(
         self, mesh, density, body, fixed=None, gravity=None, traction=None,
-        ground=None, damping=None, driven=None,
+        ground=None, damping=None, driven=None, displacement=None,
     ):
         validate_mesh(mesh)
         if isinstance(density, bool) or not isinstance(density, (int, float, np.number)):
@@ -125,15 +138,21 @@ class Model:
                 contacts.append(term)
         self.contacts = tuple(contacts)
         self.potentials = (self.body_potential, *self.loads, *self.contacts)
-        self.fixed_dofs = self._resolve_fixed(fixed)
+        self.fixed_dofs, self.fixed_groups = resolve_fixed(self.space, fixed)
+        self.prescribed_dofs, self.prescribed_values, self.prescribed_groups = resolve_displacement(
+            self.space, displacement, self.fixed_groups
+        )
+        #: DOFs held by the static supports (fixed and prescribed), sorted
+        self.held_dofs = np.union1d(self.fixed_dofs, self.prescribed_dofs).astype(np.int64)
         self.driven = self._resolve_driven(driven)
         free = np.ones(self.ndofs, dtype=bool)
-        free[self.fixed_dofs] = False
-        for _, _, dofs in self.driven:
-            free[dofs] = False
+        free[self.held_dofs] = False
+        for (_, _, dofs), comp in zip(self.driven, self._driven_components):
+            free[dofs[comp]] = False
         self.free = free
         # a Model is immutable: its arrays are read-only views for everyone
-        for arr in (self.free, self.fixed_dofs):
+        for arr in (self.free, self.fixed_dofs, self.prescribed_dofs, self.prescribed_values,
+                    self.held_dofs):
             arr.setflags(write=False)
 
     # sizes and maps -----------------------------------------------------------
@@ -278,17 +297,20 @@ class Model:
     def constraints(self, t: float):
         """DOFs held at time ``t`` (s), their positions (m) and velocities (m/s).
 
-        Fixed DOFs sit at the reference position at rest; driven ones follow
-        their motion until its release time.
+        Fixed DOFs sit at the reference position at rest, prescribed ones at
+        their prescribed displacement, at rest; driven ones follow their
+        motion until its release time.
         """
-        dofs = [self.fixed_dofs]
-        xs = [self.X[self.fixed_dofs]]
-        vs = [np.zeros(self.fixed_dofs.size)]
-        for motion, nodes_X, ndofs in self.driven:
+        dofs = [self.fixed_dofs, self.prescribed_dofs]
+        xs = [self.X[self.fixed_dofs], self.X[self.prescribed_dofs] + self.prescribed_values]
+        vs = [np.zeros(self.fixed_dofs.size), np.zeros(self.prescribed_dofs.size)]
+        for (motion, nodes_X, ndofs), comp in zip(self.driven, self._driven_components):
             if motion.active(t):
-                dofs.append(ndofs.ravel())
-                xs.append((nodes_X + motion.displacement(nodes_X, t)).ravel())
-                vs.append(np.asarray(motion.velocity(nodes_X, t), dtype=float).ravel())
+                c = comp.ravel()
+                v = np.broadcast_to(np.asarray(motion.velocity(nodes_X, t), dtype=float), nodes_X.shape)
+                dofs.append(ndofs.ravel()[c])
+                xs.append((nodes_X + motion.displacement(nodes_X, t)).ravel()[c])
+                vs.append(v.ravel()[c])
         return np.concatenate(dofs), np.concatenate(xs), np.concatenate(vs)
 
     def free_at(self, t: float) -> np.ndarray:
@@ -328,6 +350,7 @@ class Model:
     def _resolve_driven(self, driven):
         from .driven import Motion
 
+        self._driven_components = []
         if driven is None:
             return ()
         if not isinstance(driven, dict):
@@ -336,7 +359,8 @@ class Model:
                 f"{{'right': fe.Twist(6.283, duration=1.0)}}; got {driven!r}."
             )
         out = []
-        fixed_nodes = self.fixed_dofs[0::3] // 3
+        held = self.held_dofs
+        self._driven_components = []
         for name, motion in driven.items():
             if not isinstance(name, str):
                 raise InvalidParameter(f"driven keys must be boundary names (str), got {name!r}.")
@@ -346,13 +370,16 @@ class Model:
                     f"fe.Translate(offset, duration) or fe.Prescribed(function); got {motion!r}."
                 )
             dofs = self._resolve_fixed(name, what="driven").reshape(-1, 3)
-            # a node that is both fixed and driven stays fixed (e.g. the edge a fixed
-            # face shares with a driven one)
-            keep = ~np.isin(dofs[:, 0] // 3, fixed_nodes)
-            if not keep.all():
+            # a node that is both fixed (or prescribed) and driven stays fixed (e.g. the edge
+            # a fixed face shares with a driven one)
+            # (a node held in some components only is driven in the others)
+            free_comp = ~np.isin(dofs, held)
+            keep = free_comp.any(axis=1)
+            if not free_comp.all():
                 log.info("driven boundary %r: %d node(s) are also fixed and stay fixed", name,
-                         int((~keep).sum()))
+                         int((~free_comp).any(axis=1).sum()))
             dofs = dofs[keep]
+            self._driven_components.append(free_comp[keep])
             out.append((motion, self.X[dofs], dofs))
         return tuple(out)
 
@@ -424,44 +451,12 @@ class Model:
 
     # supports -----------------------------------------------------------------
     def _resolve_fixed(self, fixed, what: str = "fixed") -> np.ndarray:
-        mesh, space = self.mesh, self.space
-        nv = mesh.p.shape[1]
-        if fixed is None or (not isinstance(fixed, str) and np.size(fixed) == 0):
-            return np.zeros(0, dtype=np.int64)
-        names = [fixed] if isinstance(fixed, str) else None
-        if names is None and len(fixed) > 0 and all(isinstance(f, str) for f in fixed):
-            names = list(fixed)
-        if names is not None:
-            dofs = []
-            for name in names:
-                facets = boundary_facets(mesh, name, what=what)
-                dofs.append(space.node_dofs(space.scalar_basis.get_dofs(facets).all()))
-            return np.unique(np.concatenate(dofs)).astype(np.int64)
-        arr = np.asarray(fixed)
-        if arr.dtype == bool:
-            if arr.shape != (nv,):
-                raise InvalidParameter(
-                    f"a boolean fixed mask must have one entry per vertex ({nv}), got shape {arr.shape}."
-                )
-            mask = arr
-        elif np.issubdtype(arr.dtype, np.integer):
-            if arr.size and (arr.min() < 0 or arr.max() >= nv):
-                raise InvalidParameter(
-                    f"fixed vertex indices must lie in [0, {nv - 1}], got values from "
-                    f"{arr.min()} to {arr.max()}."
-                )
-            mask = np.zeros(nv, dtype=bool)
-            mask[arr] = True
-        else:
-            raise InvalidParameter(
-                "fixed must be a boundary name, a list of names, vertex indices or a boolean "
-                f"vertex mask; got {fixed!r}."
-            )
-        dofs = [space.vertex_dofs[mask].ravel()]
-        if space.order == 2:
-            edge_fixed = mask[mesh.edges].all(axis=0)
-            dofs.append(space.node_dofs(np.asarray(space.scalar_basis.edge_dofs)[0, edge_fixed]))
-        return np.unique(np.concatenate(dofs)).astype(np.int64)
+        """Flat, sorted DOFs of a support given as ``fixed`` accepts it (see :mod:`.supports`)."""
+        return resolve_fixed(self.space, fixed, what)[0]
+
+    def boundary_nodes(self, where) -> np.ndarray:
+        """Scalar nodes (vertices and P2 edge nodes) of a boundary name, names, indices or mask."""
+        return nodes_of(self.space, where, "boundary")
 
     def check_supported(self) -> None:
         """Raise :class:`UnderConstrained` if the fixed DOFs leave rigid-body motion free.
@@ -484,9 +479,12 @@ class Model:
         s = np.linalg.svd(B[held], compute_uv=False)
         free_modes = 6 - int(np.sum(s > 1e-8 * s[0]))  # relative to the largest: round-off level
         if free_modes:
+            names = describe_rigid_modes(self.X, held)
             raise UnderConstrained(
-                f"the fixed DOFs leave {free_modes} rigid-body mode(s) free (for instance, "
-                "fixing vertices on one line leaves the rotation about that line), so a static "
-                "problem has no unique solution. Fix a whole face (fixed='left') or at least "
-                "three vertices that are not on one line."
+                f"the fixed DOFs leave {free_modes} rigid-body mode(s) free: "
+                f"{'; '.join(names)}. A static problem then has no unique solution (fixing "
+                "vertices on one line leaves the rotation about that line; rollers on one face "
+                "leave the sliding along it). Fix a whole face (fixed='left') or at least three "
+                "vertices that are not on one line, or add component-wise supports that hold "
+                "the motions named, e.g. fixed={'left': 'x', 'front': 'y', 'bottom': 'z'}."
             )

@@ -13,10 +13,12 @@ and the layers below it, never :mod:`fem_elastic.dynamics` or above.
 from .linear_solvers import AMGSolver, AutoSolver, DirectSolver, LinearSolverFailed, SingularMatrix
 from .modal import critical_time_step, max_frequency, natural_frequencies
 from .newton import NewtonResult, newton_minimize
-from .static import StaticResult, solve_static
+from .stability import UnstableEquilibrium, lowest_eigenpair
+from .static import EquilibriumPoint, LoadPath, RoundoffWarning, StaticResult, load_path, solve_static
 
 __all__ = [
-    "AMGSolver", "AutoSolver", "DirectSolver", "LinearSolverFailed", "NewtonResult",
+    "AMGSolver", "AutoSolver", "DirectSolver", "EquilibriumPoint", "LinearSolverFailed", "LoadPath",
+    "NewtonResult", "RoundoffWarning", "UnstableEquilibrium", "load_path", "lowest_eigenpair",
     "SingularMatrix", "StaticResult", "critical_time_step", "max_frequency",
     "natural_frequencies", "newton_minimize", "solve_static",
 ]

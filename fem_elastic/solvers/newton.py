@@ -23,6 +23,16 @@ back to the projection. Near convergence the predicted decrease ``|g . dx|``
 falls to the round-off of Pi itself, where energy comparisons carry no
 information; the full Newton step is then taken (it is tiny, and Newton is
 in its quadratic regime there).
+
+The tolerance is relative to the problem's force scale: the larger of the
+caller's ``g_scale`` (a load, an inertial force), the out-of-balance force of
+the start and the force the held DOFs carry there (the reaction of the
+supports and drives, ``||g(x0)||`` on the fixed DOFs). A body held crushed or
+stretched carries forces of the size of its stresses even where its free
+DOFs are in balance, and its round-off is of that size too: an absolute
+floor there (a residual of 2e-10 N on a crushed Neo-Hookean cube that its
+elements' forces of 1e4 N cannot resolve) would call a converged state a
+failure.
 """
 
 from __future__ import annotations
@@ -124,6 +134,7 @@ def newton_minimize(
     g_floor: float = 0.0,
     gradient: Callable[[np.ndarray], np.ndarray] | None = None,
     inexact: bool = True,
+    min_iter: int = 0,
 ) -> NewtonResult:
     """Minimise ``energy`` from ``x0`` over the free DOFs.
 
@@ -142,7 +153,8 @@ def newton_minimize(
         Converged when ||g_free|| <= rtol * g_scale.
     g_scale : float, optional
         Force scale (N) of the problem, e.g. the norm of the external load;
-        the larger of it and ||g_free(x0)|| is used (default: the latter).
+        the largest of it, ||g_free(x0)|| and ||g_fixed(x0)|| (the reaction
+        the held DOFs carry) is used (default: the larger of the last two).
     max_iter : int
         Most Newton iterations.
     linear_solver : object with ``solve(A, b, near_null)``
@@ -173,6 +185,13 @@ def newton_minimize(
         first tested for convergence with the gradient only, so the
         converged iterate costs no Hessian assembly (a linear problem then
         takes one assembly instead of two).
+    min_iter : int
+        Fewest Newton steps before any convergence test may stop it (unless
+        the gradient is exactly zero). ``solve_static`` passes 1 for a load
+        step that changes the load: the start is then never "converged"
+        however small the load is against the round-off floors, since a
+        Newton step from it solves the linearised problem to the accuracy of
+        the linear solver, whatever the problem's scale.
     inexact : bool
         Inexact Newton: an iterative linear solver stops at a relative
         residual ``eta = min(1e-2, 0.1 ||g|| / ||g_0||)`` instead of its own
@@ -202,10 +221,13 @@ def newton_minimize(
         if gradient is not None and it > 0:  # test convergence before assembling a Hessian
             g = gradient(x)
             gnorm = float(np.linalg.norm(g[free]))
-            need_hessian = math.isfinite(gnorm) and gnorm > rtol * g_scale and it < max_iter
+            need_hessian = math.isfinite(gnorm) and (gnorm > rtol * g_scale or it < min_iter) \
+                and it < max_iter
         if need_hessian:
             g, H = linearize(x, not exact)
         result.seconds["linearize"] += time.perf_counter() - t0
+        if it == 0:  # the reaction the held DOFs carry: part of the problem's force scale
+            reaction = float(np.linalg.norm(g[~free])) if not free.all() else 0.0
         g = np.where(free, g, 0.0)
         gnorm = float(np.linalg.norm(g))
         result.residual_history.append(gnorm)
@@ -213,8 +235,9 @@ def newton_minimize(
             result.message = "the gradient is not finite"
             return result
         if it == 0:
-            g_scale = gnorm if g_scale is None else max(g_scale, gnorm)
-        if gnorm <= rtol * g_scale or gnorm == 0.0:
+            reaction = reaction if math.isfinite(reaction) else 0.0
+            g_scale = max(gnorm, reaction) if g_scale is None else max(g_scale, gnorm, reaction)
+        if gnorm == 0.0 or (gnorm <= rtol * g_scale and it >= min_iter):
             result.converged = True
             result.message = f"||g|| = {gnorm:.3e} N <= {rtol:.1e} * {g_scale:.3e} N"
             break
@@ -246,7 +269,7 @@ def newton_minimize(
             slope = float(g @ dx)
         t0 = time.perf_counter()
         roundoff = 0.5 * abs(slope) <= 10.0 * (energy_roundoff + _EPS * abs(e))
-        if roundoff and gnorm <= 10.0 * g_floor:
+        if roundoff and gnorm <= 10.0 * g_floor and it >= min_iter:
             result.converged = True
             result.message = (
                 f"||g|| = {gnorm:.3e} N is at its round-off level ({g_floor:.3e} N) and the "

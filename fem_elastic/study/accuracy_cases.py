@@ -270,7 +270,7 @@ def _static(p) -> dict:
         model = _model(p, traction={"right": _elastica_traction(p, beam)})
         d, s = elastica_tip(p["alpha"])
         reference, name = d * p["length"], "elastica"
-    res, seconds, calls = _timed(lambda: solve_static(model, linear_solver=DirectSolver()))
+    res, seconds, calls = _timed(lambda: solve_static(model, linear_solver=DirectSolver(), stability=False))
     w = -float(_tip_weights(model, 2) @ (res.x - model.X))
     extra = dict(n_dofs=model.ndofs, newton_iterations=res.iterations, load_steps=len(res.load_steps),
                  timed_calls=calls)
@@ -412,7 +412,7 @@ def _linearized(p) -> dict:
     """One scheme (or the reference) from the large release; histories for the report's comparison."""
     beam = _beam(p)
     model = _model(p)
-    bent = solve_static(_model(p, model.mesh, traction={"right": _elastica_traction(p, beam)}))
+    bent = solve_static(_model(p, model.mesh, traction={"right": _elastica_traction(p, beam)}), stability=False)
     weights = [_tip_weights(model, 0), _tip_weights(model, 2)]
     state = State(bent.x, np.zeros(model.ndofs), 0.0)
     f_ref = beam.first_bending_frequency(p["density"])
@@ -460,7 +460,7 @@ def _warm_up() -> None:
     for body in BODIES:
         for order in (None,) if body == "springs" else (1, 2):
             p = dict(SLENDER, body=body, order=order, cells=[2, 1, 1])
-            solve_static(_model(p, traction={"right": (0.0, 0.0, -1.0)}), linear_solver=DirectSolver())
+            solve_static(_model(p, traction={"right": (0.0, 0.0, -1.0)}), linear_solver=DirectSolver(), stability=False)
             model = _model(p)
             natural_frequencies(model, 1, mass="lumped")
             state = State.rest(model, displacement=lambda X: 1e-6 * X[:, [2, 2, 0]] ** 2)
