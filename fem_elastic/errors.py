@@ -15,6 +15,8 @@ __all__ = [
     "UnderConstrained",
     "NotConverged",
     "Diverged",
+    "MissingDependency",
+    "StepFailed",
 ]
 
 
@@ -39,6 +41,16 @@ class InvalidMesh(FemElasticError, ValueError):
 
 class InvalidParameter(FemElasticError, ValueError):
     """A physical or numerical parameter is out of its admissible range."""
+
+
+class MissingDependency(FemElasticError, ModuleNotFoundError):
+    """An optional package a feature needs is not installed; the message says what to install.
+
+    It is a :class:`ModuleNotFoundError` (so ``except ImportError`` catches it)
+    and a :class:`FemElasticError` (so the command line reports it without a
+    traceback). Raised by rendering (pyvista, imageio) and by
+    ``fe.material_from_energy`` (sympy).
+    """
 
 
 class UnderConstrained(InvalidParameter):
@@ -86,3 +98,27 @@ class Diverged(FemElasticError, RuntimeError):
         self.reason = reason
         self.last_good_state = last_good_state
         self.trajectory = trajectory
+
+
+class StepFailed(Diverged):
+    """A step of a simulation raised an error: the run ends as honestly as a divergence.
+
+    Whatever goes wrong inside a step (a user motion that raises, a linear
+    solver that gives up, a contact routine's error, a ``numpy.linalg.LinAlgError``)
+    ends :func:`fe.simulate` with this error instead: like :class:`Diverged`
+    (of which it is a subclass, so ``except fe.Diverged`` catches it too) it
+    carries the step, the time, the reason, the last good state and the frames
+    recorded so far; the original exception is its ``__cause__`` (and
+    ``original``).
+
+    Attributes
+    ----------
+    original : BaseException
+        The exception the step raised.
+    """
+
+    def __init__(self, message: str, step=None, time=None, reason=None, last_good_state=None,
+                 trajectory=None, original=None):
+        super().__init__(message, step=step, time=time, reason=reason,
+                         last_good_state=last_good_state, trajectory=trajectory)
+        self.original = original

@@ -162,6 +162,22 @@ def _check_not_converged(err) -> None:
     assert err.result.load_factor < 1.0
 
 
+def _motion_that_raises(tmp):
+    """A user motion that raises at t > 0.015 s: step 2 of a run fails."""
+    def pull(X, t):
+        if t > 0.015:
+            raise ValueError("my motion table ends at 0.015 s")
+        return np.zeros_like(X)
+
+    return _simulate(_model(driven={"right": fe.Prescribed(pull)}), fe.ImplicitEuler(), steps=4)
+
+
+def _check_step_failed(err) -> None:
+    assert isinstance(err, fe.Diverged) and isinstance(err.__cause__, ValueError)
+    assert err.step == 1 and err.reason.startswith("ValueError")
+    assert err.trajectory.times.size == 2 and err.last_good_state.t == err.time
+
+
 def _nan_in_state(tmp):
     model = _model()
     x = model.X.copy()
@@ -189,6 +205,30 @@ duration = 0.02
 """
 
 
+STATIC_SCENE = """
+[mesh]
+kind = "beam"
+cells = [2, 1, 1]
+[body]
+material = "linear"
+E = 1e6
+nu = 0.3
+density = 1000.0
+[boundary]
+fixed = { left = "xyz" }
+[solve]
+kind = "static"
+"""
+
+
+def _compressed_cube():
+    """A P2 cube of one cell fixed at its bottom, its top pushed down by 5e5 Pa: Newton
+    converges to the straight state, whose tangent has a negative eigenvalue."""
+    return fe.Model(fe.beam_mesh(1.0, 1.0, 1.0, cells=(1, 1, 1)), 1000.0,
+                    fe.ElasticBody(fe.NeoHookean(E=1e6, nu=0.3), order=2), fixed="bottom",
+                    traction={"top": (0.0, 0.0, -5e5)})
+
+
 def _scene(old, new):
     """The scene with one edit, parsed and built (names are checked against the mesh at build)."""
     assert old in SCENE, old
@@ -207,10 +247,31 @@ def _write(tmp, name, text):
     return path
 
 
+def _write_bytes(tmp, name, data: bytes):
+    path = Path(tmp) / name
+    path.write_bytes(data)
+    return path
+
+
 def _cli_scene(tmp, old, new, *options):
     assert old in SCENE, old
     path = _write(tmp, "scene.toml", SCENE.replace(old, new, 1))
     return ["run", str(path), "--out", str(Path(tmp) / "out"), "--quiet", "--no-render", *options]
+
+
+def _without_sympy(tmp):
+    """fe.material_from_energy as if sympy were not installed (``import sympy`` fails)."""
+    import sys
+
+    saved = sys.modules.get("sympy")
+    sys.modules["sympy"] = None  # makes `import sympy` raise ModuleNotFoundError
+    try:
+        return fe.material_from_energy(lambda I1, I2, J, mu: mu / 2 * (I1 - 3 - 2 * fe.math.log(J)), mu=1e6)
+    finally:
+        if saved is None:
+            del sys.modules["sympy"]
+        else:
+            sys.modules["sympy"] = saved
 
 
 # -- the list ----------------------------------------------------------------------------------
@@ -222,6 +283,33 @@ BAD_INPUTS: list[BadInput] = [
              "nu must be < 0.5", "Use a value such as 0.49 or 0.499"),
     BadInput("Young's modulus E <= 0", lambda tmp: fe.StVK(E=0.0, nu=0.3), IP,
              "E must be > 0 Pa, got E = 0.0", "Pass the stiffness in pascals, e.g. E=1e6"),
+    BadInput("two pairs of elastic constants (E, nu and mu, lam)",
+             lambda tmp: fe.NeoHookean(E=1e6, nu=0.3, mu=4e5, lam=6e5), IP,
+             "NeoHookean got E and nu and mu and lam", "give exactly one pair of (E, nu), (mu, lam) or (mu, K)"),
+    BadInput("a lone shear modulus (fe.StVK(mu=4e5))", lambda tmp: fe.StVK(mu=4e5), IP,
+             "StVK got mu", "give exactly one pair of (E, nu), (mu, lam) or (mu, K)"),
+    BadInput("a negative bulk modulus (mu=4e5, K=-1e6)", lambda tmp: fe.Corotated(mu=4e5, K=-1e6), IP,
+             "the bulk modulus K must be > 0 Pa, got K = -1000000.0", "e.g. K=1e9"),
+    BadInput("an energy whose first arguments are not F or I1, I2, J",
+             lambda tmp: fe.material_from_energy(lambda C, mu: mu * C, mu=1e6), IP,
+             "its first arguments are named ('C', 'mu')",
+             "psi(F, <params>) (an energy of the deformation gradient) or psi(I1, I2, J, <params>)"),
+    BadInput("an energy parameter left out",
+             lambda tmp: fe.material_from_energy(fe.energies.neo_hookean, mu=1e6), IP,
+             "the energy neo_hookean needs a value for lam", "pass lam=... to material_from_energy"),
+    BadInput("an energy parameter it does not have",
+             lambda tmp: fe.material_from_energy(fe.energies.neo_hookean, mu=1e6, lam=2e6, kappa=1e9), IP,
+             "the energy neo_hookean has no parameter kappa", "its parameters are ['mu', 'lam']"),
+    BadInput("an energy written with numpy.log",
+             lambda tmp: fe.material_from_energy(lambda I1, I2, J, mu: mu * (I1 - 3 - 2 * np.log(J)), mu=1e6),
+             IP, "could not be evaluated on symbols", "write psi with fe.math (fe.math.log"),
+    BadInput("an energy that returns a matrix",
+             lambda tmp: fe.material_from_energy(lambda F, mu: mu * (F.T @ F), mu=1e6), IP,
+             "must return one scalar energy density (J/m^3), got a MutableDenseMatrix of shape (3, 3)",
+             "sum its terms into one number"),
+    BadInput("fe.material_from_energy without sympy installed", _without_sympy, fe.MissingDependency,
+             "derives the energy's derivatives with sympy, which is not installed",
+             'pip install "fem_elastic[energy]"'),
     BadInput("density <= 0", lambda tmp: fe.Model(_mesh(), density=-1.0, body=_body()), IP,
              "density must be finite and > 0 kg/m^3, got -1.0", "e.g. 1000.0 for rubber-like solids"),
     BadInput("element order 3", lambda tmp: fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3), order=3), IP,
@@ -237,6 +325,35 @@ BAD_INPUTS: list[BadInput] = [
              lambda tmp: fe.solve_static(_model(fixed=[0, 1], gravity=(0.0, 0.0, -9.81))), fe.UnderConstrained,
              "leave 1 rigid-body mode(s) free",
              "Fix a whole face (fixed='left') or at least three vertices that are not on one line"),
+    BadInput("supports given as components the library does not know (fixed={\"left\": (1, 0, 0)})",
+             lambda tmp: _model(fixed={"left": (1, 0, 0)}), IP,
+             "fixed['left'] must be a string of the components held",
+             'or a bool triple such as (True, False, True)'),
+    BadInput("rollers only, leaving rigid motions free (fixed={\"left\": \"x\"})",
+             lambda tmp: fe.solve_static(_model(fixed={"left": "x"}, gravity=(0.0, 0.0, -9.81))),
+             fe.UnderConstrained, "leave 3 rigid-body mode(s) free: translation along y; translation along z",
+             "add component-wise supports that hold the motions named"),
+    BadInput("a component both fixed and prescribed",
+             lambda tmp: _model(fixed={"left": "xyz", "front": "x"}, displacement={"right": (0.01, None, None)}),
+             IP, "boundary 'right' is prescribed a displacement in component(s) 'x'",
+             "a DOF is either fixed or prescribed. Drop 'x' from one of them"),
+    BadInput("a prescribed displacement with two components (displacement={\"right\": (0.01, None)})",
+             lambda tmp: _model(displacement={"right": (0.01, None)}), IP,
+             "must be three components (ux, uy, uz) in metres", "None for a free one, e.g. (0.01, None, None)"),
+    BadInput("a static solve in zero load steps (steps=0)",
+             lambda tmp: fe.solve_static(_model(gravity=(0.0, 0.0, -9.81)), steps=0), IP,
+             "steps must be a whole number >= 1", "e.g. steps=10"),
+    BadInput("a static equilibrium that is a saddle (a cube compressed past its stability limit)",
+             lambda tmp: fe.solve_static(_compressed_cube()), fe.UnstableEquilibrium,
+             "converged to an unstable equilibrium", "Pass stabilize=True to perturb it along its lowest mode"),
+    BadInput("nu so close to 0.5 that lambda / mu ~ 1 / eps (nu* = 0.49999999999999994)",
+             lambda tmp: fe.solve_static(fe.Model(_mesh(), 1000.0, _body(fe.LinearElastic(E=1e3, nu=0.49999999999999994)),
+                                                  fixed="left", traction={"right": (0.0, -1.3, 0.0)})),
+             fe.RoundoffWarning, "the stiffness's shear part is lost below the round-off",
+             "Use nu <= 0.4999999 (lambda / mu <= 5e6), or a mixed formulation"),
+    BadInput("a static scene with a time table",
+             lambda tmp: fe.parse_scene(STATIC_SCENE + "[time]\ndt = 0.01\nduration = 1.0\n", source="scene.toml"),
+             SE, "[time] applies only to a dynamic scene", 'remove [time]'),
     BadInput("a fixed boundary the mesh does not have (fixed=\"lefft\")", lambda tmp: _model(fixed="lefft"), IP,
              "fixed names boundary 'lefft', which the mesh does not have",
              "its boundaries are ['back', 'bottom', 'front', 'left', 'right', 'top']"),
@@ -306,6 +423,9 @@ BAD_INPUTS: list[BadInput] = [
              "NaN or infinite", "finite"),
     BadInput("an integrator class instead of an instance (fe.ImplicitEuler)",
              lambda tmp: _simulate(_model(), fe.ImplicitEuler), IP, "class", "fe.ImplicitEuler()"),
+    BadInput("dt so large that dt^2 overflows (dt = 1e200 s)",
+             lambda tmp: _simulate(_model(gravity=(0.0, 0.0, -9.81)), fe.ImplicitEuler(), dt=1e200), IP,
+             "dt = 1e+200 s is too large", "a fraction of the run's duration"),
     BadInput("dt so small that dt^2 underflows (dt = 1e-300 s)",
              lambda tmp: _simulate(_model(gravity=(0.0, 0.0, -9.81)), fe.ImplicitEuler(), dt=1e-300), IP,
              "dt = 1e-300 s is too small", "use a dt of at least"),
@@ -328,6 +448,10 @@ BAD_INPUTS: list[BadInput] = [
              "the simulation diverged at step", "Try a smaller dt, an implicit integrator (fe.ImplicitEuler)",
              note="carrying .step, .time, .reason, .last_good_state and .trajectory (the frames so far)",
              check=_check_diverged),
+    BadInput("a user motion (fe.Prescribed) that raises during a run", _motion_that_raises, fe.StepFailed,
+             "step 1 (from t = 0.01 s) failed with ValueError: my motion table ends", "Fix what raised it",
+             note="a fe.Diverged carrying the step, .last_good_state, .trajectory and the error as __cause__",
+             check=_check_step_failed),
     BadInput("a static load the solver cannot reach", _unreachable_load, fe.NotConverged,
              "solve_static did not reach the full load", "Try more Newton iterations (max_iter=...)",
              note="carrying .result (the equilibrium reached so far)", check=_check_not_converged),
@@ -373,6 +497,17 @@ BAD_INPUTS: list[BadInput] = [
                                     'type = "symplectic_euler"\n[time]\ndt = 0.02\nduration = 2.0\n'
                                     "[loads]\ngravity = [0.0, 0.0, -9.81]"), 1,
              "diverged at step", "smaller dt"),
+    BadInput("a scene file nested 100000 brackets deep",
+             lambda tmp: ["run", str(_write(tmp, "deep.toml", "a = " + "[" * 100_000 + "]" * 100_000)),
+                          "--out", str(Path(tmp) / "out")], 2,
+             "nests arrays or inline tables too deeply", "check the brackets"),
+    BadInput("a scene file that is not UTF-8 (Latin-1)",
+             lambda tmp: ["run", str(_write_bytes(tmp, "latin1.toml", SCENE.replace("[body]", "[body]\n# d\xe9j\xe0 vu")
+                                                  .encode("latin-1"))), "--out", str(Path(tmp) / "out")], 2,
+             "is not UTF-8 text (byte 0xe9", "save it as UTF-8"),
+    BadInput("a CLI scene with an absurd time step (dt = 1e200 s)",
+             lambda tmp: _cli_scene(tmp, "dt = 0.01", "dt = 1e200"), 2,
+             "dt = 1e+200 s is too large", "e.g. dt=1e-3"),
 ]
 
 

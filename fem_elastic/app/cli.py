@@ -12,8 +12,13 @@ Subcommands::
 
 Every error the user can fix (a bad scene file, a bad option, a mesh that
 fails validation) is printed as one message without a traceback and gives a
-non-zero exit status: 2 for command-line and scene errors, 1 for a run that
-failed (diverged), 130 for Ctrl-C.
+non-zero exit status: 2 for command-line, scene and every other error of
+fem_elastic (a ``fe.FemElasticError``), 1 for a run that failed (diverged, or a
+step raised an error: ``summary.json`` says "diverged" or "failed") and for an
+unexpected error (a bug: one line that names it and points to ``--debug``,
+which prints the traceback), 130 for Ctrl-C, at any moment. A closed or
+broken stdout (``fem-elastic info MESH | head -c 0``) ends the command quietly,
+and text that the terminal's encoding cannot show is escaped, never an error.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ from pathlib import Path
 __all__ = ["main"]
 
 _EXIT_USAGE, _EXIT_FAILED, _EXIT_INTERRUPTED = 2, 1, 130
+_EXIT_INTERNAL = 1  # an unexpected error: what Python itself exits with on one
 
 
 class _Out:
@@ -80,8 +86,14 @@ def _print_outcomes(out, outcomes, rendered, out_dir) -> None:
         steps = traj.steps if traj is not None else 0
         cut = traj.dt_cuts if traj is not None else 0
         frames = traj.times.size if traj is not None else 0
+        if getattr(o, "figures", None):  # a static run: its load steps, a frame per point of the path
+            steps = o.figures["load_steps"]
+            frames = len(o.result.path) if o.result is not None else 0
         out(f"{o.name:<12}{o.status:<12}{steps:>7d}{cut:>6d}{frames:>8d}{o.seconds_simulate:>14.2f}"
             f"{o.seconds_output:>12.2f}")
+    for o in outcomes:
+        if getattr(o, "figures", None):
+            _print_static(out, o)
     for o in outcomes:
         traj = o.trajectory
         if o.status == "completed" and traj is not None and traj.resumed_from_step is not None:
@@ -102,6 +114,20 @@ def _print_outcomes(out, outcomes, rendered, out_dir) -> None:
     for o in outcomes:  # a failed run says why, on stderr, even with --quiet
         if o.status != "completed":
             sys.stderr.write(f"fem-elastic: {o.name}: {o.message}\n")
+
+
+def _print_static(out, o) -> None:
+    """A static run's physical result: largest displacement and the reaction on each support."""
+    f = o.figures
+    u = f["max_displacement_vector"]
+    out(f"{o.name}: static, load factor {f['load_factor']:.4g} in {f['load_steps']} load step(s); "
+        f"max |u| = {f['max_displacement']:.6g} m at vertex {f['max_displacement_vertex']} "
+        f"(u = [{u[0]:.4g}, {u[1]:.4g}, {u[2]:.4g}] m)")
+    for name, r in f["reactions"].items():
+        out(f"{o.name}:   reaction on {name}: [{r[0]:.6g}, {r[1]:.6g}, {r[2]:.6g}] N")
+    if f["min_eigenvalue"] is not None:
+        out(f"{o.name}:   lowest tangent eigenvalue {f['min_eigenvalue']:.4g} N/m: "
+            + ("stable" if f["stable"] else "UNSTABLE equilibrium (a saddle; try [solve] stabilize = true)"))
 
 
 def _collapse_pngs(paths, out_dir):
@@ -160,7 +186,8 @@ def _write_scene_summary(out_dir, scene, outcomes, rendered, seconds, status=Non
             "seconds_total": seconds,
             "variants": {
                 o.name: {"status": o.status, "message": o.message, "run_dir": o.run_dir.name,
-                         "seconds_simulate": o.seconds_simulate, "seconds_output": o.seconds_output}
+                         "seconds_simulate": o.seconds_simulate, "seconds_output": o.seconds_output,
+                         **(getattr(o, "figures", None) or {})}
                 for o in outcomes
             },
             "rendered": [str(Path(p).relative_to(out_dir)) for p in rendered],
@@ -429,6 +456,8 @@ def _add_common(p, top: bool = False) -> None:
     p.add_argument("-q", "--quiet", action="store_true", default=default,
                    help="no progress bars or tables (for scripts)")
     p.add_argument("-v", "--verbose", action="store_true", default=default, help="log solver progress")
+    p.add_argument("--debug", action="store_true", default=default,
+                   help="show the traceback of an error (for a bug report)")
 
 
 def _add_run_options(p, out_default=None) -> None:
@@ -540,9 +569,22 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    """Entry point of the ``fem-elastic`` command; returns the exit status."""
-    from ..errors import FemElasticError
+    """Entry point of the ``fem-elastic`` command; returns the exit status.
 
+    No input ends it with a raw traceback: see the module notes for what each
+    outcome prints and the exit statuses; ``--debug`` adds the traceback.
+    """
+    _usable_streams()
+    debug = "--debug" in (sys.argv[1:] if argv is None else [str(a) for a in argv])
+    try:
+        return _main(argv)
+    except SystemExit:  # argparse's --help and usage errors: their own message and status
+        raise
+    except BaseException as exc:  # noqa: BLE001 - the one place every error becomes a message
+        return _report(exc, debug)
+
+
+def _main(argv) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
     logging.basicConfig(
@@ -553,32 +595,75 @@ def main(argv=None) -> int:
     if args.command is None:
         parser.print_help()
         return _EXIT_USAGE
-    try:
-        return args.func(args)
-    except FemElasticError as exc:
-        from ..errors import InvalidMesh, InvalidParameter
+    return args.func(args)
 
-        sys.stderr.write(f"fem-elastic: error: {exc}\n")
-        return _EXIT_USAGE if isinstance(exc, (InvalidParameter, InvalidMesh)) else _EXIT_FAILED
-    except KeyboardInterrupt:
-        sys.stderr.write("fem-elastic: interrupted\n")
-        return _EXIT_INTERRUPTED
-    except FileNotFoundError as exc:
-        sys.stderr.write(f"fem-elastic: error: no such file: {exc.filename}\n")
-        return _EXIT_USAGE
-    except BrokenPipeError:
+
+def _usable_streams() -> None:
+    """Give the command a stdout and stderr it can always write to.
+
+    A stream closed by the caller (``fem-elastic ... >&-``: Python then has
+    None) becomes the null device; text the stream's encoding cannot show (an
+    ASCII locale) is escaped (``\\xe9``) instead of raising UnicodeEncodeError.
+    """
+    import os
+
+    for name in ("stdout", "stderr"):
+        stream = getattr(sys, name)
+        if stream is None:
+            setattr(sys, name, open(os.devnull, "w", encoding="utf-8"))  # noqa: SIM115 - lives to exit
+        elif hasattr(stream, "reconfigure"):
+            try:
+                stream.reconfigure(errors="backslashreplace")
+            except (ValueError, OSError):  # a stream that cannot change now (already used, detached)
+                pass
+
+
+def _one_line(text: str) -> str:
+    return " ".join(part.strip() for part in str(text).splitlines() if part.strip())
+
+
+def _report(exc: BaseException, debug: bool) -> int:
+    """Say what ended the command in one line on stderr (with the traceback under --debug)."""
+    from ..errors import Diverged, FemElasticError
+
+    if isinstance(exc, BrokenPipeError):
         # the reader of our output went away (`fem-elastic info MESH | head`): stop quietly
         import os
 
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
         return _EXIT_FAILED
-    except OSError as exc:
+    if debug and not isinstance(exc, KeyboardInterrupt):
+        import traceback
+
+        traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
+    if isinstance(exc, KeyboardInterrupt):
+        message, status = "interrupted", _EXIT_INTERRUPTED
+    elif isinstance(exc, Diverged):  # a StepFailed too: a run that failed
+        message, status = f"error: {_one_line(exc)}", _EXIT_FAILED
+    elif isinstance(exc, FemElasticError):
+        message, status = f"error: {_one_line(exc)}", _EXIT_USAGE
+    elif isinstance(exc, FileNotFoundError):
+        message, status = f"error: no such file: {exc.filename}", _EXIT_USAGE
+    elif isinstance(exc, OSError):
         # a path the user gave that cannot be read or written: a directory where a file is
         # expected, a file where a directory is, no permission, a full disk
         where = f": {exc.filename}" if exc.filename else ""
-        sys.stderr.write(f"fem-elastic: error: {exc.strerror or exc}{where}; check the path and "
-                         "its permissions.\n")
-        return _EXIT_USAGE
+        message = f"error: {exc.strerror or _one_line(exc)}{where}; check the path and its permissions."
+        status = _EXIT_USAGE
+    else:
+        hint = "" if debug else " Run the command again with --debug to see the traceback."
+        message = (f"unexpected error: {type(exc).__name__}: {_one_line(exc)[:500]} (a bug, or an input "
+                   f"fem_elastic does not check yet; please report it).{hint}")
+        status = _EXIT_INTERNAL
+    try:
+        sys.stderr.write(f"fem-elastic: {message}\n")
+        sys.stderr.flush()
+    except (OSError, ValueError):  # stderr is gone too: the status says it
+        pass
+    return status
 
 
 if __name__ == "__main__":  # pragma: no cover

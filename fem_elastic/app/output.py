@@ -7,7 +7,9 @@ A run directory ``DIR`` holds
   (vertex) tets, with point data ``displacement`` (m) and ``velocity`` (m/s) and cell
   data ``von_mises`` (Pa) and ``energy_density`` (J/m^3), see :mod:`fem_elastic.physics.fields`;
 - ``DIR/summary.json``: the run's figures, written when the run ends (completed,
-  diverged or interrupted).
+  diverged, failed (a step raised an error, :class:`fe.StepFailed`) or interrupted);
+  a run that diverged or failed says at which step (``failed_step``, ``failed_time``)
+  and why (``reason``).
 
 Each file is written atomically (:mod:`fem_elastic.files`), and the PVD is rewritten after
 every frame, so the directory is a readable series at any moment: a crash or Ctrl-C loses
@@ -27,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..dynamics.observers import Observer
-from ..errors import Diverged, InvalidParameter
+from ..errors import Diverged, InvalidParameter, StepFailed
 from ..physics.fields import CellFields
 from .vtu import write_pvd, write_vtu_frame
 from ..files import write_text_atomic
@@ -42,7 +44,7 @@ FRAMES_DIR = "frames"
 SUMMARY_NAME = "summary.json"
 FRAME_PATTERN = "frame_{:06d}.vtu"
 
-STATUSES = ("completed", "interrupted", "diverged")
+STATUSES = ("completed", "interrupted", "diverged", "failed")
 
 
 def to_json(value):
@@ -163,9 +165,12 @@ class SeriesWriter(Observer):
     its callback, ``callback=writer.callback``): write the initial state, let
     it write every ``every``-th step, then :meth:`finish` with the
     trajectory. With ``every`` equal to simulate's ``record_every`` the frames
-    are exactly the Trajectory's. As a context manager, leaving the block on an
-    exception finishes the run as ``"diverged"`` (:class:`fe.Diverged`) or
-    ``"interrupted"`` (Ctrl-C or any other error) and re-raises it.
+    are exactly the Trajectory's. When a :class:`fe.Diverged` ends the run it
+    finishes the series itself (its ``on_failure`` hook: the last good state is
+    the last frame, the summary says ``"diverged"``, or ``"failed"`` for a
+    :class:`fe.StepFailed`, with the step and the reason). As a context
+    manager, leaving the block on an exception finishes the run the same way,
+    or as ``"interrupted"`` (Ctrl-C or any other error), and re-raises it.
 
     Parameters
     ----------
@@ -348,6 +353,31 @@ class SeriesWriter(Observer):
         """:class:`fem_elastic.dynamics.Observer` hook: :meth:`callback` with the step taken."""
         self.callback(event.k, event.after)
 
+    def on_failure(self, run, error) -> None:
+        """:class:`fem_elastic.dynamics.Observer` hook: finish the series of a run that
+        diverged or failed (:meth:`finish_failed`)."""
+        if not self.finished:
+            self.finish_failed(error)
+
+    def finish_failed(self, error) -> Path:
+        """Finish the series of a run that ``error`` (a :class:`fe.Diverged`) ended.
+
+        The last good state (``error.last_good_state``) is the last frame, and
+        the summary says ``"failed"`` for a :class:`fe.StepFailed` (a step
+        raised an error), else ``"diverged"``, with the error's message, the
+        step (``failed_step``), its start time (``failed_time``, s) and the reason.
+
+        Returns
+        -------
+        pathlib.Path
+            ``run_dir / "summary.json"``.
+        """
+        status = "failed" if isinstance(error, StepFailed) else "diverged"
+        extra = {"failed_step": getattr(error, "step", None), "failed_time": getattr(error, "time", None),
+                 "reason": getattr(error, "reason", None)}
+        return self.finish(getattr(error, "trajectory", None), status=status, message=str(error),
+                           extra=extra, final_state=getattr(error, "last_good_state", None))
+
     def callback(self, k: int, state) -> None:
         """``fe.simulate`` callback: write a frame after every ``every``-th step (and the last).
 
@@ -375,7 +405,7 @@ class SeriesWriter(Observer):
             :class:`fe.Diverged`); its ``final_state`` is the last frame and
             its ``summary()`` the run's figures. Without it (an interrupted
             run) the last state the callback saw is used.
-        status : {"completed", "interrupted", "diverged"}
+        status : {"completed", "interrupted", "diverged", "failed"}
         message : str
             How the run ended, in words; default the trajectory's message.
         extra : dict, optional
@@ -462,7 +492,7 @@ class SeriesWriter(Observer):
         if exc is None:
             self.finish()
         elif isinstance(exc, Diverged):
-            self.finish(getattr(exc, "trajectory", None), status="diverged", message=str(exc))
+            self.finish_failed(exc)
         else:
             what = "interrupted (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else \
                 f"stopped by {type(exc).__name__}: {exc}"

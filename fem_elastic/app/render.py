@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FemElasticError, InvalidParameter
+from ..errors import InvalidParameter, MissingDependency
 from ..files import _atomic_write
 from .render_scene import FIELDS, _Run, _run_from_series, _Scene, color_range
 
@@ -66,15 +66,6 @@ logger = logging.getLogger(__name__)
 FORMATS = ("mp4", "gif", "png")
 
 _INSTALL = 'pip install "fem_elastic[render]"'
-
-
-class MissingDependency(FemElasticError, ModuleNotFoundError):
-    """An optional package that rendering needs is not installed.
-
-    It is a :class:`ModuleNotFoundError` (so ``except ImportError`` catches it)
-    and a :class:`~fem_elastic.FemElasticError` (so the command line reports it
-    without a traceback); the message says what to install.
-    """
 
 
 def _require(module: str):

@@ -7,8 +7,10 @@ run directory per variant (``OUT/<variant>/series.pvd``, ``frames/``,
 ``summary.json``), the movies and frames rendered from them side by side, and
 ``OUT/summary.json`` with every variant's figures.
 
-A run that diverges or is interrupted (Ctrl-C) still leaves every frame
-written so far readable and a ``summary.json`` that says how it ended.
+A run that diverges, fails (a step raised an error: :class:`fe.StepFailed`)
+or is interrupted (Ctrl-C) still leaves every frame written so far readable,
+a checkpoint of its last good step and a ``summary.json`` that says how it
+ended (for a failure: at which step, and why).
 
 Each run directory also holds ``checkpoint/`` (:mod:`fem_elastic.dynamics.checkpoint`):
 written every ``[output] checkpoint_every`` steps, on Ctrl-C and at the end.
@@ -27,7 +29,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import Diverged, InvalidParameter
+from ..errors import Diverged, InvalidParameter, StepFailed
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +53,7 @@ class RunOutcome:
     run_dir : Path
         Where its series and ``summary.json`` are.
     status : str
-        ``"completed"``, ``"diverged"`` or ``"interrupted"``.
+        ``"completed"``, ``"diverged"``, ``"failed"`` (a step raised an error) or ``"interrupted"``.
     message : str
         How it ended, in words.
     trajectory : Trajectory or None
@@ -63,6 +65,10 @@ class RunOutcome:
         Of which writing the VTU series (s).
     run : BuiltRun or None
         The variant as built (model, integrator, dt, steps, ...).
+    result : StaticResult or None
+        A static run's result (``[solve] kind = "static"``, :mod:`fem_elastic.app.static_run`).
+    figures : dict or None
+        A static run's physical result: largest displacement (m), reaction on each support (N).
     """
 
     name: str
@@ -73,6 +79,8 @@ class RunOutcome:
     seconds_simulate: float = 0.0
     seconds_output: float = 0.0
     run: object = None
+    result: object = None
+    figures: dict | None = None
 
 
 class SceneInterrupted(KeyboardInterrupt):
@@ -114,14 +122,19 @@ def run_variant(run, out_dir, *, progress: bool = False, checkpoint_every: int |
     Returns
     -------
     RunOutcome
-        ``status`` is ``"completed"`` or ``"diverged"`` (a :class:`fe.Diverged`
-        is caught, recorded in ``summary.json`` and reported here).
+        ``status`` is ``"completed"``, ``"diverged"`` or ``"failed"`` (a
+        :class:`fe.Diverged`, or a :class:`fe.StepFailed` when a step raised an
+        error, is caught, recorded in ``summary.json`` and reported here).
 
     Raises
     ------
     SceneInterrupted
         On Ctrl-C, after the frames so far, a checkpoint and ``summary.json`` are written.
     """
+    if getattr(run, "static", None) is not None:  # [solve] kind = "static": a load path, no time
+        from .static_run import run_static_variant
+
+        return run_static_variant(run, out_dir)
     from ..dynamics.checkpoint import CHECKPOINT_NAME, load_checkpoint
     from .output import SUMMARY_NAME, SeriesWriter, remove_temporary_files
     from ..dynamics.simulate import simulate
@@ -152,9 +165,11 @@ def run_variant(run, out_dir, *, progress: bool = False, checkpoint_every: int |
     except Diverged as err:
         elapsed = time.perf_counter() - t0
         msg = str(err)  # where, why, and what to try
-        writer.finish(err.trajectory, status="diverged", message=msg, final_state=err.last_good_state)
+        if not writer.finished:  # the writer's on_failure hook finished it already, as a rule
+            writer.finish_failed(err)
+        status = "failed" if isinstance(err, StepFailed) else "diverged"
         log.info("%s: %s", run.name, msg)  # the caller reports it (the command on stderr)
-        return RunOutcome(run.name, run_dir, "diverged", msg, err.trajectory, elapsed, writer.seconds_output, run)
+        return RunOutcome(run.name, run_dir, status, msg, err.trajectory, elapsed, writer.seconds_output, run)
     except KeyboardInterrupt:
         elapsed = time.perf_counter() - t0
         msg = (f"interrupted after {writer.steps_taken} of {run.steps} steps; the frames written so far in "

@@ -2,7 +2,8 @@
 
 A scene file names a mesh, a body, its supports and loads, optionally a ground,
 damping, driven boundaries and an initial velocity, an integrator, a time step
-and duration, and what to write. :func:`load_scene` reads and checks one;
+and duration, and what to write; or, with ``[solve] kind = "static"``, the
+load steps of a static solve (:meth:`BuiltRun.solve`) instead of the time stepping. :func:`load_scene` reads and checks one;
 :meth:`Scene.build` turns it into :class:`BuiltRun` objects (a
 :class:`fem_elastic.Model`, an integrator, ``dt``, the number of steps, the
 initial :class:`fem_elastic.State`) ready for :func:`fem_elastic.dynamics.simulate`.
@@ -23,7 +24,6 @@ defaults) lives in :mod:`fem_elastic.app.scene_schema`; :func:`scene_help` print
 
 from __future__ import annotations
 
-import bisect
 import math
 import re
 from dataclasses import dataclass, field
@@ -35,6 +35,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python < 3.11
     import tomli as tomllib
 
 from ..errors import FemElasticError, InvalidParameter
+from .toml_lines import KeyLines as _KeyLines
 from .scene_schema import (
     CALIBRATIONS,
     MATERIALS,
@@ -85,182 +86,6 @@ class SceneError(InvalidParameter):
         self.suggestion = suggestion
         place = ", ".join(p for p in (file, None if line is None else f"line {line}") if p)
         super().__init__(f"{place}: {message}" if place else message)
-
-
-# ---------------------------------------------------------------------------------------
-# where each key is written: a small scanner of (valid) TOML text
-
-_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
-
-
-class _KeyLines:
-    """Line of every table header, key and array element of a TOML text.
-
-    ``lines[path]`` with ``path`` a tuple of keys and array indices, as in
-    :class:`fem_elastic.app.scene_schema.Invalid`. Only run on text that tomllib
-    has parsed, so the scanner can trust the syntax.
-    """
-
-    def __init__(self, text: str):
-        self.text = text
-        self.n = len(text)
-        self.i = 0
-        self.newlines = [m.start() for m in re.finditer("\n", text)]
-        self.lines: dict[tuple, int] = {}
-        self.tables: dict[tuple, int] = {}  # array-of-tables path -> index of its last element
-        try:
-            self._document()
-        except (IndexError, ValueError):  # pragma: no cover - keep what was found
-            pass
-
-    def line(self, pos: int) -> int:
-        return bisect.bisect_left(self.newlines, pos) + 1
-
-    def _record(self, path: tuple, pos: int) -> None:
-        self.lines.setdefault(path, self.line(pos))
-
-    def _skip(self, newlines: bool) -> None:
-        t = self.text
-        while self.i < self.n:
-            c = t[self.i]
-            if c in " \t\r" or (newlines and c == "\n"):
-                self.i += 1
-            elif c == "#":
-                end = t.find("\n", self.i)
-                self.i = self.n if end < 0 else end
-            else:
-                break
-
-    def _string(self) -> str:
-        t, i = self.text, self.i
-        for quote in ('"""', "'''"):
-            if t.startswith(quote, i):
-                end = t.find(quote, i + 3)
-                while quote == '"""' and end > 0 and _escaped(t, end):
-                    end = t.find(quote, end + 1)
-                end += 3
-                while end < self.n and t[end] == quote[0]:  # up to two quotes end the content
-                    end += 1
-                self.i = end
-                return t[i + 3:end - 3]
-        q = t[i]
-        j = i + 1
-        while t[j] != q or (q == '"' and _escaped(t, j)):
-            j += 1
-        self.i = j + 1
-        raw = t[i + 1:j]
-        if q == '"':
-            try:
-                raw = tomllib.loads(f"k = {t[i:j + 1]}")["k"]
-            except tomllib.TOMLDecodeError:  # pragma: no cover
-                pass
-        return raw
-
-    def _key(self) -> tuple:
-        parts = []
-        while True:
-            self._skip(False)
-            c = self.text[self.i]
-            if c in "\"'":
-                parts.append(self._string())
-            else:
-                m = _BARE_KEY.match(self.text, self.i)
-                parts.append(m.group())
-                self.i = m.end()
-            self._skip(False)
-            if self.i < self.n and self.text[self.i] == ".":
-                self.i += 1
-                continue
-            return tuple(parts)
-
-    def _resolve(self, keys: tuple) -> tuple:
-        path: tuple = ()
-        for k in keys:
-            path += (k,)
-            if path in self.tables:
-                path += (self.tables[path],)
-        return path
-
-    def _document(self) -> None:
-        t = self.text
-        current: tuple = ()
-        while True:
-            self._skip(True)
-            if self.i >= self.n:
-                return
-            start = self.i
-            if t.startswith("[[", self.i):
-                self.i += 2
-                keys = self._key()
-                self.i += 2  # "]]"
-                parent = self._resolve(keys[:-1])
-                path = parent + (keys[-1],)
-                index = self.tables.get(path, -1) + 1
-                self.tables[path] = index
-                current = path + (index,)
-                self._record(path, start)
-                self._record(current, start)
-            elif t[self.i] == "[":
-                self.i += 1
-                keys = self._key()
-                self.i += 1  # "]"
-                current = self._resolve(keys)
-                for k in range(1, len(current) + 1):
-                    self._record(current[:k], start)
-            else:
-                self._pair(current)
-
-    def _pair(self, table: tuple) -> None:
-        start = self.i
-        keys = self._key()
-        self._skip(False)
-        self.i += 1  # "="
-        for k in range(1, len(keys) + 1):
-            self._record(table + keys[:k], start)
-        self._value(table + keys)
-
-    def _value(self, path: tuple) -> None:
-        self._skip(False)
-        t = self.text
-        c = t[self.i]
-        if c in "\"'":
-            self._string()
-        elif c == "[":
-            self.i += 1
-            index = 0
-            while True:
-                self._skip(True)
-                if t[self.i] == "]":
-                    self.i += 1
-                    return
-                self._record(path + (index,), self.i)
-                self._value(path + (index,))
-                self._skip(True)
-                if t[self.i] == ",":
-                    self.i += 1
-                    index += 1
-        elif c == "{":
-            self.i += 1
-            while True:
-                self._skip(False)
-                if t[self.i] == "}":
-                    self.i += 1
-                    return
-                self._pair(path)
-                self._skip(False)
-                if t[self.i] == ",":
-                    self.i += 1
-        else:  # number, boolean, date: up to the next delimiter
-            while self.i < self.n and t[self.i] not in ",]}\n#":
-                self.i += 1
-
-
-def _escaped(text: str, pos: int) -> bool:
-    """Whether the character at ``pos`` is escaped by an odd number of backslashes."""
-    n = 0
-    while pos - 1 - n >= 0 and text[pos - 1 - n] == "\\":
-        n += 1
-    return n % 2 == 1
 
 
 # ---------------------------------------------------------------------------------------
@@ -342,13 +167,18 @@ def parse_scene(text: str, *, source: str = "<string>", base_dir=".") -> "Scene"
             "(fe.load_scene(path) does), or decode bytes with .decode('utf-8').", file=source)
     try:
         document = tomllib.loads(text)
+        locations = _KeyLines(text).lines
+        try:
+            spec = validate(document)
+        except Invalid as exc:
+            raise _located(exc, locations, source) from None
     except tomllib.TOMLDecodeError as exc:
         raise _syntax_error(exc, text, source) from None
-    locations = _KeyLines(text).lines
-    try:
-        spec = validate(document)
-    except Invalid as exc:
-        raise _located(exc, locations, source) from None
+    except RecursionError:  # arrays or inline tables nested thousands deep: no scene needs that
+        raise SceneError(
+            "the file nests arrays or inline tables too deeply to be read (deeper than Python's "
+            "recursion limit); a scene needs at most a few levels: check the brackets.", file=source,
+        ) from None
     if spec["scene"]["name"] is None:
         stem = Path(source).stem if source and not source.startswith("<") else "scene"
         spec["scene"]["name"] = stem
@@ -383,7 +213,14 @@ def load_scene(path) -> "Scene":
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise SceneError(f"scene file {str(path)!r} not found; check the path.", file=str(path)) from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError as exc:
+        line = path.read_bytes()[:exc.start].count(b"\n") + 1
+        raise SceneError(
+            f"the scene file is not UTF-8 text (byte 0x{exc.object[exc.start]:02x} cannot be "
+            "decoded); save it as UTF-8 (e.g. `iconv -f latin1 -t utf-8`).",
+            file=str(path), line=line,
+        ) from None
+    except OSError as exc:
         raise SceneError(f"cannot read the scene file: {exc}.", file=str(path)) from None
     return parse_scene(text, source=str(path), base_dir=path.parent)
 
@@ -465,6 +302,35 @@ class BuiltRun:
     record_every: int
     output: dict
     info: dict
+    static: dict | None = None
+
+    @property
+    def kind(self) -> str:
+        """``"static"`` for a scene with ``[solve] kind = "static"``, else ``"dynamic"``."""
+        return "dynamic" if self.static is None else "static"
+
+    def solve(self, **options):
+        """Solve a static scene's run through :func:`fem_elastic.solve_static`.
+
+        Parameters
+        ----------
+        **options
+            Passed on to :func:`fem_elastic.solve_static`; ``steps``, ``stability``
+            and ``stabilize`` default to the scene's ``[solve]`` table.
+
+        Returns
+        -------
+        StaticResult
+        """
+        from ..solvers.static import solve_static
+
+        if self.static is None:
+            raise InvalidParameter(
+                f'run "{self.name}" is dynamic: use .simulate() (or [solve] kind = "static" in the scene).'
+            )
+        settings = dict(self.static)
+        settings.update(options)
+        return solve_static(self.model, **settings)
 
     def simulate(self, **options):
         """Run it through :func:`fem_elastic.dynamics.simulate`.
@@ -483,6 +349,10 @@ class BuiltRun:
         """
         from ..dynamics.simulate import simulate
 
+        if self.static is not None:
+            raise InvalidParameter(
+                f'run "{self.name}" is static ([solve] kind = "static"): use .solve() for its load path.'
+            )
         settings = {"steps": self.steps, "state": self.state, "record_every": self.record_every}
         if "t_end" in options:  # an end time replaces the scene's step count
             settings.pop("steps")
@@ -562,10 +432,16 @@ class Scene:
                 raise SceneError(f'the scene has no run "{name}"{hint} Its runs: '
                                  f'{", ".join(self.variants)}.', key="variants", file=self.source,
                                  suggestion=near)
-        self._steps()  # before the mesh: a wrong time table is cheap to tell
+        if not self.static:
+            self._steps()  # before the mesh: a wrong time table is cheap to tell
         mesh, mesh_info = self._mesh()
         self._check_boundaries(mesh)
         return [self._run(name, mesh, mesh_info) for name in names]
+
+    @property
+    def static(self) -> bool:
+        """Whether the scene asks for a static solve (``[solve] kind = "static"``)."""
+        return (self.spec.get("solve") or {}).get("kind") == "static"
 
     def mesh(self):
         """The scene's mesh (points in m), checked against the boundaries the scene names.
@@ -643,12 +519,18 @@ class Scene:
 
         fixed = self.spec["boundary"]["fixed"]
         nv = mesh.p.shape[1]
-        for i, f in enumerate(fixed):
-            if isinstance(f, str):
-                check(f, ("boundary", "fixed", i))
-            elif f >= nv:
-                raise self._error(("boundary", "fixed", i), f"fixed vertex index {f} is out of range: "
-                                  f"the mesh has {nv} vertices (0 to {nv - 1}).")
+        if isinstance(fixed, dict):
+            for name in fixed:
+                check(name, ("boundary", "fixed", name))
+        else:
+            for i, f in enumerate(fixed):
+                if isinstance(f, str):
+                    check(f, ("boundary", "fixed", i))
+                elif f >= nv:
+                    raise self._error(("boundary", "fixed", i), f"fixed vertex index {f} is out of range: "
+                                      f"the mesh has {nv} vertices (0 to {nv - 1}).")
+        for name in self.spec["boundary"].get("displacement") or {}:
+            check(name, ("boundary", "displacement", name))
         for name in self.spec["loads"]["traction"]:
             check(name, ("loads", "traction", name))
         for i, d in enumerate(self.spec["loads"]["driven"]):
@@ -687,7 +569,10 @@ class Scene:
         spec, terms = self.spec, {}
         loads = spec["loads"]
         if spec["boundary"]["fixed"]:
-            terms["fixed"] = spec["boundary"]["fixed"]
+            fixed = spec["boundary"]["fixed"]
+            terms["fixed"] = dict(fixed) if isinstance(fixed, dict) else fixed
+        if spec["boundary"].get("displacement"):
+            terms["displacement"] = {k: tuple(v) for k, v in spec["boundary"]["displacement"].items()}
         if loads["gravity"] is not None:
             terms["gravity"] = tuple(loads["gravity"])
         if loads["traction"]:
@@ -723,6 +608,8 @@ class Scene:
         spec = self.spec
         body, bpath, integ, ipath = self._variant(name)
         model = self._guard(bpath, Model, mesh, body["density"], self._body(body, bpath), **self._terms())
+        if self.static:
+            return self._static_run(name, model, body, mesh_info)
         integrator = self._guard(ipath, make_integrator, integ)
         dt = spec["time"]["dt"]
         steps = self._steps()
@@ -737,6 +624,23 @@ class Scene:
             name=name, model=model, integrator=integrator, dt=dt, steps=steps, state=state,
             record_every=out["every"], output=output,
             info=self._info(name, body, integ, integrator, mesh_info, steps),
+        )
+
+    def _static_run(self, name: str, model, body: dict, mesh_info: dict) -> BuiltRun:
+        """A run of a static scene: the model and the load steps of ``[solve]``."""
+        from ..dynamics.state import State
+
+        spec = self.spec
+        solve = spec["solve"]
+        out = spec["output"]
+        output = {"vtu": out["vtu"], "render": list(out["render"]), "color_by": out["color_by"],
+                  "size": tuple(out["size"]), "fps": out["fps"], "checkpoint_every": 0}
+        static = {"steps": solve["steps"], "stability": solve["stability"],
+                  "stabilize": solve["stabilize"]}
+        info = self._info(name, body, None, None, mesh_info, solve["steps"])
+        return BuiltRun(
+            name=name, model=model, integrator=None, dt=0.0, steps=solve["steps"],
+            state=State.rest(model), record_every=1, output=output, info=info, static=static,
         )
 
     def _info(self, name, body, integ, integrator, mesh_info, steps) -> dict:
@@ -761,16 +665,22 @@ class Scene:
             "mesh": dict(mesh_info),
             "n_vertices": mesh_info["n_vertices"],
             "n_tets": mesh_info["n_tets"],
-            "fixed": list(spec["boundary"]["fixed"]),
+            "fixed": (dict(spec["boundary"]["fixed"]) if isinstance(spec["boundary"]["fixed"], dict)
+                      else list(spec["boundary"]["fixed"])),
+            "prescribed_displacement": {k: list(v) for k, v in
+                                        (spec["boundary"].get("displacement") or {}).items()},
             "gravity": None if spec["loads"]["gravity"] is None else list(spec["loads"]["gravity"]),
             "traction": {k: list(v) for k, v in spec["loads"]["traction"].items()},
             "driven": [dict(x) for x in spec["loads"]["driven"]],
             "ground": None if g is None else {"kind": "plane", "z": g["z"], "method": g["method"]},
             "damping": None if d is None else {"alpha": d["alpha"], "beta": d["beta"]},
             "initial_velocity": None if spec["initial"] is None else list(spec["initial"]["velocity"]),
-            "integrator": integrator.name,
-            "integrator_options": {k: v for k, v in integ.items() if k != "type"},
-            "dt": spec["time"]["dt"],
-            "duration": spec["time"]["duration"],
-            "steps_planned": steps,
+            **({"solve": "static", "load_steps_planned": steps, "stability": spec["solve"]["stability"],
+                "stabilize": spec["solve"]["stabilize"]} if integrator is None else {
+                "integrator": integrator.name,
+                "integrator_options": {k: v for k, v in integ.items() if k != "type"},
+                "dt": spec["time"]["dt"],
+                "duration": spec["time"]["duration"],
+                "steps_planned": steps,
+            }),
         }

@@ -37,7 +37,13 @@ from ..dynamics.integrators import (
     Midpoint,
     Newmark,
     SymplecticEuler,
+    Trapezoid,
+    VelocityVerlet,
 )
+from ..dynamics.position_based import PBD, XPBD
+from ..dynamics.projective import ProjectiveDynamics
+from ..dynamics.shape_matching import MODES as SHAPE_MATCHING_MODES
+from ..dynamics.shape_matching import ShapeMatching
 from ..solvers.linear_solvers import AMGSolver, AutoSolver, DirectSolver
 from ..materials import Corotated, LinearElastic, NeoHookean, StableNeoHookean, StVK
 from ..physics.springs import lloyd_stiffness, van_gelder_stiffness
@@ -47,6 +53,7 @@ from .schema_types import (
     Array,
     Boolean,
     Choice,
+    Displacements,
     Fixed,
     Integer,
     Invalid,
@@ -90,6 +97,12 @@ INTEGRATORS = {
     "implicit_euler": ImplicitEuler,
     "linearized_implicit_euler": LinearizedImplicitEuler,
     "newmark": Newmark,
+    "pbd": PBD,
+    "xpbd": XPBD,
+    "shape_matching": ShapeMatching,
+    "projective_dynamics": ProjectiveDynamics,
+    "trapezoid": Trapezoid,
+    "velocity_verlet": VelocityVerlet,
 }
 CALIBRATIONS = {"van_gelder": van_gelder_stiffness, "lloyd": lloyd_stiffness}
 #: ``linear_solver = "..."`` in [integrator]: the solver objects it stands for
@@ -117,7 +130,8 @@ def _constructor_parameters(cls) -> list[inspect.Parameter]:
 
 
 #: integrator options whose values are names: the allowed names (for suggestions)
-OPTION_CHOICES = {"mass": ("lumped", "consistent"), "linear_solver": tuple(LINEAR_SOLVERS)}
+OPTION_CHOICES = {"mass": ("lumped", "consistent"), "linear_solver": tuple(LINEAR_SOLVERS),
+                  "mode": SHAPE_MATCHING_MODES}
 
 
 def _option_type(param: inspect.Parameter) -> Type | None:
@@ -313,12 +327,38 @@ COMPARE = Table(
         Key("body", BODY, ABSENT, doc="a full body table, as [body] (default: the main body)"),
         Key("integrator", INTEGRATOR, ABSENT,
             doc="a full integrator table, as [integrator] (default: the main one)"),
-        Key("name", String(), lambda t: (t["body"] or {}).get("name") or (t["integrator"] or {}).get("type"),
+        Key("name", String(), lambda t: (t["body"] or {}).get("name") or (t.get("integrator") or {}).get("type"),
             doc="the run's name (variant)", default_text="the body's name, else the integrator type"),
     ),
     "Another run of the same scene with another body and/or integrator (repeat for several).",
     rule=_compare_rule,
 )
+
+def _boundary_rule(table: dict, path: tuple) -> dict:
+    if not table.get("displacement"):  # the spec names only the supports a scene has
+        table.pop("displacement", None)
+    return table
+
+
+SOLVE = Table(
+    "solve",
+    (
+        Key("kind", Choice(("dynamic", "static")), "dynamic",
+            doc='"dynamic": simulate in time ([integrator], [time]); "static": the equilibrium '
+                "under the loads and prescribed displacements, along a load path (fe.solve_static)"),
+        Key("steps", Integer(ge=1), 1, doc="equal load steps; each is a frame of the series (a "
+            "failed step is halved)", when={"kind": ("static",)}),
+        Key("stability", Boolean(), True, doc="check the lowest eigenvalue of the tangent at the "
+            "equilibrium (warn when unstable)", when={"kind": ("static",)}),
+        Key("stabilize", Boolean(), False, doc="perturb an unstable equilibrium along its lowest "
+            "mode until it is stable", when={"kind": ("static",)}),
+    ),
+    'What is solved. A static scene has no [integrator], [time], [initial], [damping] or '
+    "[[loads.driven]]: leave them out.",
+)
+
+#: Tables and keys that only a dynamic scene has (a static solve has no time).
+DYNAMIC_ONLY = ("integrator", "time", "initial", "damping")
 
 SCENE_FILE = Table(
     "scene file",
@@ -344,8 +384,12 @@ SCENE_FILE = Table(
            "top."), REQUIRED, doc="the reference mesh"),
         Key("body", BODY, REQUIRED, doc="the body"),
         Key("boundary", Table("boundary", (
-            Key("fixed", Fixed(), [], doc="held at their reference positions"),
-        ), "Supports."), {}, doc="supports"),
+            Key("fixed", Fixed(), [], doc="held at their reference positions: all components, "
+                'or those a table gives, e.g. { left = "x", bottom = "z" } (rollers)'),
+            Key("displacement", Displacements(), {}, "m", "prescribed displacements, e.g. "
+                '{ right = [0.01, "free", "free"] }; ramped with the load steps of a static solve, '
+                "held from the start in dynamics"),
+        ), "Supports.", rule=_boundary_rule), {}, doc="supports"),
         Key("loads", Table("loads", (
             Key("gravity", Vector(), ABSENT, "m/s^2", "gravitational acceleration (none if absent)"),
             Key("traction", NamedVectors(), {}, "Pa", "dead load per reference area on named boundaries"),
@@ -376,6 +420,7 @@ SCENE_FILE = Table(
             Key("velocity", Vector(), [0.0, 0.0, 0.0], "m/s", "uniform initial velocity"),
         ), "Initial state (default: at rest in the reference configuration)."), ABSENT,
             doc="initial state"),
+        Key("solve", SOLVE, {}, doc="dynamic (time stepping, the default) or static (a load path)"),
         Key("integrator", INTEGRATOR, REQUIRED, doc="the time integrator"),
         Key("time", Table("time", (
             Key("dt", Number(gt=0), REQUIRED, "s", "time step", default_text="0.0166667"),
@@ -397,6 +442,39 @@ SCENE_FILE = Table(
     ),
     "A scene file.",
 )
+
+
+def _static_table(table: Table) -> Table:
+    """``table`` without the keys of time stepping (the scene file of a static solve)."""
+    from dataclasses import replace
+
+    keys = []
+    for key in table.keys:
+        if key.name in DYNAMIC_ONLY:
+            continue
+        if key.name == "loads":
+            loads = key.type
+            key = replace(key, type=replace(loads, keys=tuple(k for k in loads.keys if k.name != "driven")))
+        if key.name == "compare":
+            compare = key.type.table
+            key = replace(key, type=replace(key.type, table=replace(
+                compare, keys=tuple(k for k in compare.keys if k.name != "integrator"),
+                rule=_static_compare_rule)))
+        keys.append(key)
+    return replace(table, keys=tuple(keys))
+
+
+def _static_compare_rule(table: dict, path: tuple) -> dict:
+    if table["body"] is None:
+        raise Invalid(path, "a [[compare]] run of a static scene needs a body to differ from the "
+                            'main run, e.g. body = { material = "linear", E = 2e7, nu = 0.3, '
+                            "density = 1000.0 }.")
+    table["integrator"] = None
+    return table
+
+
+#: The scene file of a static solve ([solve] kind = "static").
+STATIC_SCENE_FILE = _static_table(SCENE_FILE)
 
 
 def validate(document: dict) -> dict:
@@ -427,7 +505,11 @@ def validate(document: dict) -> dict:
     >>> spec["mesh"]["cells"], spec["body"]["order"], spec["ground"], spec["loads"]["gravity"]
     ([20, 2, 2], 1, None, None)
     """
-    spec = SCENE_FILE.check(document, ())
+    solve = document.get("solve") if isinstance(document, dict) else None
+    if isinstance(solve, dict) and solve.get("kind") == "static":
+        spec = _validate_static(document)
+    else:
+        spec = SCENE_FILE.check(document, ())
     names = [spec["body"]["name"]]
     _check_run_name(names[0], ("body", "name"))
     for i, run in enumerate(spec["compare"]):
@@ -439,6 +521,30 @@ def validate(document: dict) -> dict:
                 f'{", ".join(names)}); give this [[compare]] a name = "...".',
             )
         names.append(run["name"])
+    return spec
+
+
+def _validate_static(document: dict) -> dict:
+    """A static scene: the scene file without the tables of time stepping."""
+    for name in DYNAMIC_ONLY:
+        if name in document:
+            raise Invalid((name,), f"[{name}] applies only to a dynamic scene; this one has [solve] "
+                                   f'kind = "static" (a load path, no time): remove [{name}].')
+    loads = document.get("loads")
+    if isinstance(loads, dict) and "driven" in loads:
+        raise Invalid(("loads", "driven"), "[[loads.driven]] moves a boundary in time; a static "
+                      'scene has no time: prescribe its displacement instead, [boundary] displacement '
+                      '= { right = [0.01, "free", "free"] }.')
+    for i, c in enumerate(document.get("compare") or []):
+        if isinstance(c, dict) and "integrator" in c:
+            raise Invalid(("compare", i, "integrator"), "a static scene has no integrator: a "
+                          "[[compare]] run of it differs by its body only.")
+    spec = STATIC_SCENE_FILE.check(document, ())
+    for name in DYNAMIC_ONLY:
+        spec[name] = None
+    for c in spec["compare"]:
+        c["integrator"] = None
+    spec["loads"]["driven"] = []
     return spec
 
 

@@ -21,7 +21,7 @@ from typing import Any, Callable
 
 __all__ = [
     "ABSENT", "REQUIRED",
-    "Array", "Boolean", "Choice", "Fixed", "Integer", "Invalid", "Key", "NamedVectors", "Number",
+    "Array", "Boolean", "Choice", "Displacements", "Fixed", "Integer", "Invalid", "Key", "NamedVectors", "Number",
     "String", "Table", "TableArray", "Type", "Vector",
     "closest", "format_path", "homes", "key_name", "split_path",
 ]
@@ -331,15 +331,34 @@ def Vector(n: int = 3, item: Type = Number(), label: str | None = None) -> Array
     return Array(item, n, label or f"{names.get(n, 'array')} numbers")
 
 
+#: How the components a support holds are written in a scene file (for messages).
+COMPONENTS_TEXT = 'a string of the components held, "x", "y", "z", "xy", "yz", "xz" or "xyz", or an array of three booleans'
+
+
+def _components(value, path):
+    """A support's components as written in a scene: "xz" or [true, false, true]."""
+    if isinstance(value, str) and value and all(c in "xyz" for c in value) and len(set(value)) == len(value):
+        return value
+    if isinstance(value, list) and len(value) == 3 and all(isinstance(v, bool) for v in value) and any(value):
+        return list(value)
+    raise Invalid(path, f"{key_name(path)} must be {COMPONENTS_TEXT}; {_got(value)}.")
+
+
 @dataclass(frozen=True)
 class Fixed(Type):
-    """What ``[boundary] fixed`` accepts: a boundary name, names, or vertex indices."""
+    """What ``[boundary] fixed`` accepts: a boundary name, names, vertex indices, or a table
+    ``{boundary = components}`` (``{ left = "x", bottom = "z" }``: rollers)."""
 
-    label = 'boundary names, e.g. ["left"], or vertex indices, e.g. [0, 1, 2]'
+    label = ('boundary names, e.g. ["left"], vertex indices, e.g. [0, 1, 2], or a table of the '
+             'components held, e.g. { left = "xyz", front = "z" }')
 
     def check(self, value, path, unit=""):
         if isinstance(value, str):
             return [value]
+        if isinstance(value, dict):
+            if not value:
+                return []
+            return {k: _components(v, path + (k,)) for k, v in value.items()}
         if isinstance(value, list):
             if all(isinstance(v, str) for v in value):
                 return list(value)
@@ -351,8 +370,43 @@ class Fixed(Type):
         raise Invalid(
             path,
             f"fixed must be a list of boundary names (e.g. [\"left\"]) or of vertex indices "
-            f"(e.g. [0, 4, 7]), not a mix; {_got(value)}.",
+            f"(e.g. [0, 4, 7]), not a mix, or a table of the components each boundary holds "
+            f"(e.g. {{ left = \"xyz\", front = \"z\" }}, components: {COMPONENTS_TEXT}); {_got(value)}.",
         )
+
+
+@dataclass(frozen=True)
+class Displacements(Type):
+    """``[boundary] displacement``: ``{boundary = [ux, uy, uz]}`` (m), ``"free"`` for a free
+    component, e.g. ``{ right = [0.01, "free", "free"] }``."""
+
+    label = 'table {boundary = [ux, uy, uz]} (m), "free" for a component left free'
+
+    def check(self, value, path, unit=""):
+        if not isinstance(value, dict):
+            raise Invalid(
+                path, f"{key_name(path)} must be a table {{boundary = [ux, uy, uz]}} in metres, "
+                f'"free" for a free component, e.g. {{ right = [0.01, "free", "free"] }}; {_got(value)}.'
+            )
+        out = {}
+        for name, vec in value.items():
+            p = path + (name,)
+            if not isinstance(vec, list) or len(vec) != 3:
+                raise Invalid(p, f'{key_name(p)} must be [ux, uy, uz] (m), "free" for a free '
+                                 f'component, e.g. [0.01, "free", "free"]; {_got(vec)}.')
+            comps = []
+            for i, c in enumerate(vec):
+                if c == "free":
+                    comps.append(None)
+                elif isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c):
+                    comps.append(float(c))
+                else:
+                    raise Invalid(p + (i,), f'each component must be a finite number (m) or "free"; '
+                                            f"{_got(c)}.")
+            if all(c is None for c in comps):
+                raise Invalid(p, f"{key_name(p)} leaves every component free: prescribe at least one.")
+            out[name] = comps
+        return out
 
 
 @dataclass(frozen=True)

@@ -21,14 +21,21 @@ from .integrators import (
     Newmark,
     StepStats,
     SymplecticEuler,
+    Trapezoid,
+    VelocityVerlet,
 )
-from .observers import Observer  # noqa: F401
+from .observers import InversionWarning, Observer  # noqa: F401
+from .position_based import PBD, XPBD, ConstraintNeoHookean
+from .projective import ProjectiveDynamics
+from .shape_matching import ShapeMatcher, ShapeMatching
 from .simulate import StabilityWarning, simulate
 from .state import State
 from .trajectory import Trajectory
 
 __all__ = [
     "Checkpoint", "ExplicitEuler", "ImplicitEuler", "Integrator", "LinearizedImplicitEuler",
-    "Midpoint", "Newmark", "Observer", "RK4", "StabilityWarning", "State", "StepStats",
-    "SymplecticEuler", "Trajectory", "load_checkpoint", "simulate",
+    "ConstraintNeoHookean", "Midpoint", "Newmark", "Observer", "PBD", "XPBD",
+    "ProjectiveDynamics", "RK4", "ShapeMatcher", "ShapeMatching",
+    "StabilityWarning", "State", "StepStats",
+    "SymplecticEuler", "Trajectory", "Trapezoid", "VelocityVerlet", "load_checkpoint", "simulate",
 ]

@@ -20,7 +20,9 @@ A checkpoint directory holds
   and angular (kg m^2/s) momentum, vertex displacements (m) and velocities (m/s));
 - ``steps.f64``: the per-step solver statistics, appended (one record per step, the
   fields of ``Trajectory.step_stats`` in the order of ``trajectory.STEP_FIELDS``;
-  counts are stored as float64, exact below 2^53);
+  counts are stored as float64, exact below 2^53); ``checkpoint.npz`` names the
+  fields, and a checkpoint whose records hold other fields (written by an
+  earlier version, before ``min_det_F``) is refused with a typed error;
 - ``cuts.jsonl``: every failed attempt of a step (step, t, dt, reason), appended, one
   JSON object per line.
 
@@ -201,6 +203,9 @@ class Checkpoint:
         The run it belongs to (see :func:`run_fingerprint`).
     e_ref, scale : float
         The energy bound's reference (J) and scale (J) at that point.
+    work, work_abs : float
+        The work driven boundaries had done since ``e_ref`` (J) and the sum of
+        its per-step magnitudes (J) (:class:`fem_elastic.dynamics.observers.BlowUpWatch`).
     driving : bool
         Whether a driven boundary was moving at ``state.t``.
     wall_time : float
@@ -235,6 +240,8 @@ class Checkpoint:
     integrator: str = ""
     dt: float = 0.0
     cuts_bytes: int = 0
+    work: float = 0.0
+    work_abs: float = 0.0
 
     @property
     def complete(self) -> bool:
@@ -318,10 +325,18 @@ def load_checkpoint(directory) -> Checkpoint:
                 f"the checkpoint {path} has format {meta.get('format')!r}, this version reads "
                 f"{FORMAT}; remove the directory to start afresh."
             )
-        t, e_ref, scale, wall = (float(s) for s in scalars)
+        t, e_ref, scale, wall = (float(s) for s in scalars[:4])
+        work, work_abs = (float(s) for s in scalars[4:6]) if scalars.size >= 6 else (0.0, 0.0)
+        # the per-step fields of steps.f64; before they were named, the ten of format 1's first
+        # version (no min_det_F): a different record size, which cannot be appended to
+        step_fields = tuple(meta.get("step_fields", _STEP_FIELDS_UNNAMED))
+        if step_fields != STEP_FIELDS:
+            raise _OldStepFields(path, step_fields)
         n_frames, step, n_cuts, cuts_bytes = (int(meta[k]) for k in ("n_frames", "step", "n_cuts", "cuts_bytes"))
         frame_size, n_steps, driving = int(meta["frame_size"]), int(meta["n_steps"]), bool(meta["driving"])
         fingerprint, dt = meta["fingerprint"], float.fromhex(meta["fingerprint"]["dt"])
+    except _OldStepFields as old:
+        raise InvalidParameter(str(old)) from None
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
         raise InvalidParameter(
             f"the checkpoint {path} cannot be read ({type(exc).__name__}: {exc}); remove the "
@@ -340,7 +355,26 @@ def load_checkpoint(directory) -> Checkpoint:
         integrator_state=integ, fingerprint=fingerprint, e_ref=e_ref, scale=scale,
         driving=driving, wall_time=wall, frames=frames, step_stats=stats, cuts=cuts,
         integrator=fingerprint.get("integrator", ""), dt=dt, cuts_bytes=cuts_bytes,
+        work=work, work_abs=work_abs,
     )
+
+
+#: The per-step fields of a checkpoint that does not name them (written before ``min_det_F``).
+_STEP_FIELDS_UNNAMED = STEP_FIELDS[:10]
+
+
+class _OldStepFields(ValueError):
+    """A checkpoint whose ``steps.f64`` records hold other per-step fields than this version's."""
+
+    def __init__(self, path, fields):
+        missing = [f for f in STEP_FIELDS if f not in fields]
+        super().__init__(
+            f"the checkpoint {path} was written by another version of fem_elastic: its per-step "
+            f"records hold {len(fields)} fields, this version records {len(STEP_FIELDS)}"
+            + (f" (it lacks {', '.join(missing)})" if missing else "")
+            + "; it cannot be resumed. Start the run afresh (resume=False, or `fem-elastic run` "
+            "without --resume), or finish it with the version that wrote it."
+        )
 
 
 def _read_records(path: Path, n: int, size: int) -> np.ndarray:
@@ -444,12 +478,13 @@ class Checkpointer:
         meta = {
             "format": FORMAT, "step": k, "n_steps": self.fingerprint["n_steps"], "n_frames": nf,
             "n_cuts": nc, "cuts_bytes": cuts_bytes, "frame_size": self.frame_size,
-            "driving": bool(snapshot.driving),
+            "driving": bool(snapshot.driving), "step_fields": list(STEP_FIELDS),
             "fingerprint": self.fingerprint,
         }
         s = snapshot.state
         arrays = {
-            "x": s.x, "v": s.v, "scalars": np.array([s.t, snapshot.e_ref, snapshot.scale, snapshot.wall_time]),
+            "x": s.x, "v": s.v, "scalars": np.array([s.t, snapshot.e_ref, snapshot.scale, snapshot.wall_time,
+                                                 snapshot.work, snapshot.work_abs]),
             "meta": np.array(json.dumps(meta)),
         }
         for key, a in snapshot.integrator_state.items():
@@ -505,6 +540,8 @@ class _Snapshot:
     driving: bool
     wall_time: float
     integrator_state: dict
+    work: float = 0.0
+    work_abs: float = 0.0
 
 
 def check_resumable(ck: Checkpoint, fingerprint: dict) -> None:

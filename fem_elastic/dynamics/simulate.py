@@ -9,6 +9,15 @@ progress bar. A step the integrator cannot take (an implicit step that fails
 even after cutting dt) and a step the watch rejects both end the run with one
 :class:`fe.Diverged`, built by :meth:`Run.diverged`, which carries the step,
 time, reason, the last good state and the trajectory recorded so far.
+
+Any other error raised inside a step (a user motion that raises, a linear
+solver that gives up, a contact routine's error, a ``LinAlgError``: anything
+but ``KeyboardInterrupt`` and ``SystemExit``) ends the run the same way, as a
+:class:`fe.StepFailed` (a subclass of ``Diverged``, built by :meth:`Run.failed`)
+whose ``__cause__`` is the original error. Whatever ends the run with a
+``Diverged``, every observer's ``on_failure(run, err)`` hook is called first
+(the checkpoint of the last good step is written, a ``SeriesWriter`` finishes
+its series as ``"diverged"`` or ``"failed"``).
 """
 
 from __future__ import annotations
@@ -22,10 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import Diverged, InvalidParameter
+from ..errors import Diverged, InvalidParameter, StepFailed
 from .checkpoint import Checkpoint, trajectory_from_records
 from .integrators.base import check_dt, check_state
-from .observers import BlowUpWatch, Callback, CheckpointWriter, ProgressBar, Recorder, StepEvent
+from .observers import (BlowUpWatch, Callback, CheckpointWriter, InversionWatch, ProgressBar, Recorder,
+                        StepEvent)
 from .state import State
 from .trajectory import COUNT_FIELDS, STEP_FIELDS, Trajectory
 
@@ -120,6 +130,14 @@ def simulate(
     Diverged
         With ``step``, ``time``, ``reason``, ``last_good_state`` and
         ``trajectory`` (the frames recorded up to the last good state).
+    StepFailed
+        (a ``Diverged``) when the step raised an error of its own (a user
+        motion, a linear solver, a contact routine): the same attributes, and
+        the original error as ``__cause__``. With ``checkpoint_dir``, a
+        checkpoint of the last good step is written before either is raised.
+    InversionWarning
+        (a warning, the run goes on) when accepted steps had inverted elements
+        (det F <= 0); ``step_stats["min_det_F"]`` holds each step's minimum.
     KeyboardInterrupt
         Ctrl-C, after writing a checkpoint of the last step completed (with ``checkpoint_dir``).
 
@@ -144,7 +162,8 @@ def simulate(
                                 checkpoint_dir, checkpoint_every, resume, 9 + 6 * model.mesh.p.shape[1])
     run = Run(model, integrator, h, n_steps, int(record_every), state, start)
     watch = BlowUpWatch(energy_growth, check_every=min(int(record_every), 10))
-    chain = [watch, Recorder(), *([Callback(callback)] if callback is not None else []), *observers,
+    chain = [watch, InversionWatch(), Recorder(), *([Callback(callback)] if callback is not None else []),
+             *observers,
              *([CheckpointWriter(ckpt, watch)] if ckpt is not None else []),
              *([ProgressBar()] if progress else [])]
     if start is not None:
@@ -163,6 +182,18 @@ def simulate(
         run.stop_clock()
         for obs in chain:
             obs.on_finish(run)
+    except Diverged as err:  # StepFailed too: the observers keep what can be kept, then it propagates
+        run.stop_clock()
+        for obs in chain:
+            hook = getattr(obs, "on_failure", None)  # optional: observers written before it existed
+            if hook is None:
+                continue
+            try:
+                hook(run, err)
+            except Exception as exc:  # never hide the error that ended the run behind this one
+                log.error("%s.on_failure failed (%s: %s) after: %s", type(obs).__name__,
+                          type(exc).__name__, exc, err.reason)
+        raise
     except KeyboardInterrupt:
         for obs in chain:
             obs.on_interrupt(run)
@@ -290,6 +321,7 @@ class Run:
         self.mass = "lumped" if getattr(integrator, "explicit", True) else getattr(integrator, "mass", "lumped")
         self.stats = {k: np.zeros(n_steps, dtype=np.int64) for k in COUNT_FIELDS}
         self.stats.update({k: np.zeros(n_steps) for k in STEP_FIELDS[len(COUNT_FIELDS):]})
+        self.stats["min_det_F"][:] = np.nan  # measured by the InversionWatch on every accepted step
         self.resumed_from = resumed_from
         self.state, self.steps_done, self.frames, self.cuts, self._wall0 = state, 0, [], [], 0.0
         if resumed_from is not None:  # everything the loop had in hand at the checkpoint
@@ -323,6 +355,9 @@ class Run:
         except Diverged as err:
             self._collect_cuts(k, getattr(self.integrator, "last_stats", None))
             raise self.diverged(err.reason or str(err), detail=str(err)) from err
+        except Exception as err:  # a step's own error ends the run as honestly (not Ctrl-C)
+            self._collect_cuts(k, getattr(self.integrator, "last_stats", None))
+            raise self.failed(err) from err
         self.stats["seconds_step"][k] = time.perf_counter() - t0
         st = self.integrator.last_stats
         for name in COUNT_FIELDS:
@@ -375,6 +410,27 @@ class Run:
             f"{(detail or reason).rstrip('.')}. The last good state and the frames recorded so far "
             f"are attached (err.last_good_state, err.trajectory). {advice}".rstrip(),
             step=k, time=state.t, reason=reason, last_good_state=state,
+        )
+        err.trajectory = traj
+        return err
+
+    def failed(self, error: BaseException) -> StepFailed:
+        """The :class:`fe.StepFailed` that ends the run when the step after ``self.state`` raised ``error``.
+
+        Like :meth:`diverged` it carries the step, time, reason (the error's
+        type and message), the last good state and the frames recorded so far;
+        the caller raises it ``from error``.
+        """
+        k, state = self.steps_done, self.state
+        reason = f"{type(error).__name__}: {error}".rstrip(": ")
+        traj = self.trajectory()
+        traj.message = f"failed at step {k}: {reason}"
+        err = StepFailed(
+            f"step {k} (from t = {state.t:.6g} s) failed with {reason.rstrip('.')}. The run stops "
+            "there: the last good state and the frames recorded so far are attached "
+            "(err.last_good_state, err.trajectory; the original error is err.__cause__). Fix what "
+            "raised it (a motion function, the scene's settings) and run again.",
+            step=k, time=state.t, reason=reason, last_good_state=state, original=error,
         )
         err.trajectory = traj
         return err

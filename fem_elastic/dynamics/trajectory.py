@@ -1,7 +1,8 @@
 """The record of a simulation: a Trajectory.
 
 Frames are recorded every ``record_every`` steps (and at the end); the
-per-step solver statistics are kept for every step.
+per-step solver statistics are kept for every step, with the smallest
+det F of the body after it (``min_det_F``: <= 0 means an inverted element).
 """
 
 from __future__ import annotations
@@ -15,9 +16,12 @@ __all__ = ["Trajectory", "STEP_FIELDS", "COUNT_FIELDS"]
 #: The per-step statistics of a run (``Trajectory.step_stats``): counts, then seconds.
 STEP_FIELDS = ("gradient_evaluations", "newton_iterations", "line_search_cuts",
                "linear_iterations", "dt_cuts", "substeps", "seconds_linearize", "seconds_solve",
-               "seconds_line_search", "seconds_step")
+               "seconds_line_search", "seconds_step", "min_det_F")
 COUNT_FIELDS = STEP_FIELDS[:6]
 
+
+#: Per-step fields that are not work done (a sum of them means nothing).
+_NOT_SUMMED = ("min_det_F",)
 
 _CUTS_LISTED = 50  # a summary lists the first failed attempts, and counts the rest
 
@@ -40,8 +44,10 @@ class Trajectory:
     step_stats : dict of numpy.ndarray
         Per step ``(steps,)``: ``gradient_evaluations``, ``newton_iterations``,
         ``line_search_cuts``, ``linear_iterations``, ``dt_cuts`` (failed attempts
-        before the step succeeded), ``substeps`` (sub-steps it was taken in), and
-        ``seconds_linearize``, ``seconds_solve``, ``seconds_line_search``, ``seconds_step``.
+        before the step succeeded), ``substeps`` (sub-steps it was taken in),
+        ``seconds_linearize``, ``seconds_solve``, ``seconds_line_search``, ``seconds_step``,
+        and ``min_det_F``: the smallest det F over the body's quadrature points
+        after the step (per tet for P1 and spring bodies; <= 0: an element is inverted).
     cuts : list of dict
         Every failed attempt of a step, where and why: ``step`` (index),
         ``t`` (s, where the attempt started), ``dt`` (s, the step size that
@@ -106,5 +112,11 @@ class Trajectory:
         if self.resumed_from_step is not None:
             out["resumed_from_step"] = self.resumed_from_step
         for k, v in st.items():
-            out[f"{k}_total"] = float(np.sum(v))
+            if k not in _NOT_SUMMED:
+                out[f"{k}_total"] = float(np.sum(v))
+        det = np.asarray(st.get("min_det_F", np.zeros(0)), dtype=float)
+        det = det[np.isfinite(det)]
+        # the smallest det F over the run's steps, and how many steps ended with an inverted element
+        out["min_det_F"] = float(det.min()) if det.size else None
+        out["steps_inverted"] = int(np.count_nonzero(det <= 0.0))
         return out

@@ -16,6 +16,7 @@ from .damping import Rayleigh
 from .driven import Motion, Prescribed, Translate, Twist
 from .elastic_body import ElasticBody, ElasticPotential
 from .fields import CellFields, cell_fields, von_mises
+from .mixed_body import MixedPotential
 from .model import Model
 from .obstacles import Box, Ground, Obstacle, Sphere
 from .potential import LinearPotential, Potential
@@ -24,7 +25,7 @@ from .stiffness_warping import WarpedStiffness
 
 __all__ = [
     "Box", "CellFields", "ElasticBody", "ElasticPotential", "Ground", "LinearPotential",
-    "MassSpring", "Model", "Motion", "Obstacle", "Potential", "Prescribed", "Rayleigh",
+    "MassSpring", "MixedPotential", "Model", "Motion", "Obstacle", "Potential", "Prescribed", "Rayleigh",
     "RectangularCantilever", "Sphere", "SpringPotential", "Translate", "Twist", "WarpedStiffness",
     "cell_fields", "elastica_tip", "lloyd_stiffness", "van_gelder_stiffness", "von_mises",
 ]
