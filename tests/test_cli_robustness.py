@@ -75,14 +75,22 @@ def _one_clean_line(err):
 
 
 # -- the handler (in process) ------------------------------------------------------------------
-def test_every_library_error_is_one_line_and_exit_2(monkeypatch, capsys):
+def test_every_library_error_is_one_line_with_its_exit_status(monkeypatch, capsys):
+    # a computation that failed exits 1 (as before the handler existed), a bad input 2
     def not_converged(*args, **kwargs):
         raise fe.NotConverged("solver X did not converge\nin 3 iterations; try more iterations")
 
     monkeypatch.setattr("fem_elastic.geometry.mesh.mesh_quality", not_converged)
-    assert cli.main(["info", str(MESH)]) == 2
+    assert cli.main(["info", str(MESH)]) == 1
     line = _one_clean_line(_said(capsys)[1])
     assert "did not converge in 3 iterations; try more iterations" in line
+
+    def bad_value(*args, **kwargs):
+        raise fe.InvalidParameter("E must be > 0 Pa\ngot -1")
+
+    monkeypatch.setattr("fem_elastic.geometry.mesh.mesh_quality", bad_value)
+    assert cli.main(["info", str(MESH)]) == 2
+    assert "E must be > 0 Pa got -1" in _one_clean_line(_said(capsys)[1])
 
 
 def test_an_unexpected_error_is_named_with_a_pointer_to_debug(monkeypatch, capsys):

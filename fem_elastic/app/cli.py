@@ -12,10 +12,11 @@ Subcommands::
 
 Every error the user can fix (a bad scene file, a bad option, a mesh that
 fails validation) is printed as one message without a traceback and gives a
-non-zero exit status: 2 for command-line, scene and every other error of
-fem_elastic (a ``fe.FemElasticError``), 1 for a run that failed (diverged, or a
-step raised an error: ``summary.json`` says "diverged" or "failed") and for an
-unexpected error (a bug: one line that names it and points to ``--debug``,
+non-zero exit status: 2 for command-line, scene, mesh and parameter errors
+(``fe.InvalidParameter``, ``fe.InvalidMesh``) and unusable paths, 1 for a
+computation that failed (a run that diverged or whose step raised an error:
+``summary.json`` says "diverged" or "failed"; a static solve that did not
+converge; any other ``fe.FemElasticError``) and for an unexpected error (a bug: one line that names it and points to ``--debug``,
 which prints the traceback), 130 for Ctrl-C, at any moment. A closed or
 broken stdout (``fem-elastic info MESH | head -c 0``) ends the command quietly,
 and text that the terminal's encoding cannot show is escaped, never an error.
@@ -624,7 +625,7 @@ def _one_line(text: str) -> str:
 
 def _report(exc: BaseException, debug: bool) -> int:
     """Say what ended the command in one line on stderr (with the traceback under --debug)."""
-    from ..errors import Diverged, FemElasticError
+    from ..errors import Diverged, FemElasticError, InvalidMesh, InvalidParameter
 
     if isinstance(exc, BrokenPipeError):
         # the reader of our output went away (`fem-elastic info MESH | head`): stop quietly
@@ -643,8 +644,9 @@ def _report(exc: BaseException, debug: bool) -> int:
         message, status = "interrupted", _EXIT_INTERRUPTED
     elif isinstance(exc, Diverged):  # a StepFailed too: a run that failed
         message, status = f"error: {_one_line(exc)}", _EXIT_FAILED
-    elif isinstance(exc, FemElasticError):
-        message, status = f"error: {_one_line(exc)}", _EXIT_USAGE
+    elif isinstance(exc, FemElasticError):  # a bad input (2), or a computation that failed (1)
+        message = f"error: {_one_line(exc)}"
+        status = _EXIT_USAGE if isinstance(exc, (InvalidParameter, InvalidMesh)) else _EXIT_FAILED
     elif isinstance(exc, FileNotFoundError):
         message, status = f"error: no such file: {exc.filename}", _EXIT_USAGE
     elif isinstance(exc, OSError):

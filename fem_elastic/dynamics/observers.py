@@ -250,11 +250,13 @@ class BlowUpWatch(Observer):
     def _drive_work(self, run, before: State, after: State) -> float:
         """The work (J) the driven boundaries did on the body over one step (module notes)."""
         model = run.model
-        dofs = [d.ravel() for motion, _, d in model.driven
+        # the DOFs each drive holds (only its driven components); a node on two driven
+        # boundaries is counted once
+        dofs = [d.ravel()[c.ravel()] for (motion, _, d), c in zip(model.driven, model._driven_components)
                 if motion.active(before.t) and motion.active(after.t)]
         if not dofs:
             return 0.0
-        held = np.concatenate(dofs)
+        held = np.unique(np.concatenate(dofs))
         g0 = self._drive_force(run, before)[held]
         g1 = self._drive_force(run, after)[held]
         w_pi = 0.5 * float((g0 + g1) @ (after.x[held] - before.x[held]))

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import Diverged, InvalidParameter, StepFailed
+from ..errors import Diverged, InvalidMesh, InvalidParameter, StepFailed
 from .checkpoint import Checkpoint, trajectory_from_records
 from .integrators.base import check_dt, check_state
 from .observers import (BlowUpWatch, Callback, CheckpointWriter, InversionWatch, ProgressBar, Recorder,
@@ -355,6 +355,8 @@ class Run:
         except Diverged as err:
             self._collect_cuts(k, getattr(self.integrator, "last_stats", None))
             raise self.diverged(err.reason or str(err), detail=str(err)) from err
+        except (InvalidParameter, InvalidMesh):  # a setting the first step finds wrong: the caller's
+            raise
         except Exception as err:  # a step's own error ends the run as honestly (not Ctrl-C)
             self._collect_cuts(k, getattr(self.integrator, "last_stats", None))
             raise self.failed(err) from err

@@ -63,7 +63,7 @@ class EigenCheck:
     __slots__ = ("value", "vector", "stable", "method", "seconds", "iterations")
 
     def __init__(self, value, vector, stable, method, seconds, iterations=0):
-        self.value, self.vector, self.stable = float(value), vector, bool(stable)
+        self.value, self.vector, self.stable = float(value), vector, None if stable is None else bool(stable)
         self.method, self.seconds, self.iterations = method, float(seconds), int(iterations)
 
     def __repr__(self):
@@ -142,7 +142,15 @@ def _lobpcg(A, M, scale, rtol, maxiter):
         w, v, hist = spla.lobpcg(A, X0, M=M, largest=False, tol=rtol * scale, maxiter=maxiter,
                                  retResidualNormsHistory=True)
     j = int(np.argmin(w))
-    return float(w[j]), v[:, j], len(hist)
+    lam, phi = float(w[j]), v[:, j]
+    # LOBPCG stopped at maxiter returns an upper bound of the lowest eigenvalue, which could
+    # call a saddle stable: accept the pair only if its residual met the tolerance (x10 slack
+    # for the norm of a block column against LOBPCG's own per-column test)
+    residual = float(np.linalg.norm(A @ phi - lam * phi)) / max(float(np.linalg.norm(phi)), 1e-300)
+    if not residual <= 10.0 * rtol * scale:
+        raise ArithmeticError(f"LOBPCG did not converge in {maxiter} iterations (residual "
+                              f"{residual:.3g}, tolerance {rtol * scale:.3g})")
+    return lam, phi, len(hist)
 
 
 def lowest_eigenpair(
@@ -218,5 +226,6 @@ def lowest_eigenpair(
             lam, phi, method = float(w[0]), (v[:, 0] if v is not None else np.zeros(n)), "dense"
     vec = np.zeros(ndofs)
     vec[idx] = phi / (np.linalg.norm(phi) or 1.0)
-    stable = lam >= -tol * scale
+    # None when no eigensolver converged: unknown, neither stable nor a saddle
+    stable = None if not np.isfinite(lam) else bool(lam >= -tol * scale)
     return EigenCheck(lam, vec, stable, method, time.perf_counter() - t0, iterations)

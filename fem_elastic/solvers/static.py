@@ -226,7 +226,8 @@ class StaticResult:
         Lowest eigenvalue of the free-DOF exact tangent at the last
         equilibrium (N/m); None when not checked (``stability=False``).
     stable : bool or None
-        Whether that equilibrium is a minimum of the energy (None when not checked).
+        Whether that equilibrium is a minimum of the energy (None when not checked, or
+        when no eigensolver converged).
     buckling_mode : numpy.ndarray or None
         The eigenvector of ``min_eigenvalue`` at the vertices, ``(n_vertices, 3)``
         (unit norm over the DOFs).
@@ -596,7 +597,7 @@ def _check_final(model, problem, total, x, free, near_null, stabilize, solver, p
         ec = _eigen(model, x, 1.0, free, near_null, total, factor)
     tries = 0
     size = float(np.ptp(model.X.reshape(-1, 3), axis=0).max())
-    while not ec.stable and stabilize and tries < 4:
+    while ec.stable is False and stabilize and tries < 4:
         tries += 1
         # an amplitude of 1e-3 of the body's size at the largest nodal motion, x10 per retry
         amp = 10.0 ** (tries - 4) * size / max(float(np.abs(ec.vector).max()), 1e-300)
@@ -631,7 +632,10 @@ def _check_final(model, problem, total, x, free, near_null, stabilize, solver, p
     point.min_eigenvalue, point.stable = ec.value, ec.stable
     total.min_eigenvalue, total.stable = ec.value, ec.stable
     total.buckling_mode = model.to_vertices(ec.vector)
-    if not ec.stable:
+    if ec.stable is None:
+        log.warning("solve_static: the stability check found no eigenvalue (no eigensolver "
+                    "converged); result.stable is None")
+    elif not ec.stable:
         warnings.warn(
             f"solve_static converged to an unstable equilibrium: the lowest eigenvalue of the "
             f"tangent on the free DOFs is {ec.value:.4g} N/m < 0, so the state is a saddle of the "
