@@ -138,3 +138,21 @@ def test_a_checkpoint_with_the_old_step_records_is_refused_with_the_fix(tmp_path
         fe.load_checkpoint(tmp_path)
     with pytest.raises(fe.InvalidParameter, match="Start the run afresh"):
         fe.simulate(model, fe.ImplicitEuler(), 0.01, steps=3, checkpoint_dir=tmp_path, resume=True)
+
+
+def test_the_fused_det_F_is_the_numpy_one_to_the_bit(monkeypatch):
+    """The per-step watch's numba kernel (one pass per tet) against the numpy path, inverted tets included."""
+    from fem_elastic.discretization import fused
+    from fem_elastic.physics.inversion import DetF
+
+    if not fused.available():
+        pytest.skip("numba is not installed: only the numpy path exists")
+    model = fe.Model(fe.beam_mesh(cells=(6, 2, 2)), density=1000.0,
+                     body=fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3)))
+    x = model.X + 0.05 * np.random.default_rng(3).standard_normal(model.ndofs)  # some tets inverted
+    det = DetF(model)
+    fast = det(x)
+    monkeypatch.setenv("FEM_ELASTIC_NUMBA", "0")
+    slow = det(x)
+    assert (slow <= 0).any() and (slow > 0).any()
+    np.testing.assert_array_equal(fast, slow)

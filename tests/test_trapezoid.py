@@ -10,34 +10,11 @@ from test_checkpoint import _beam, _kicked, _StopAt, assert_same_run
 
 import fem_elastic as fe
 from fem_elastic.app.scene_schema import integrator_options, make_integrator
+from one_mode import in_mode as _in_mode
+from one_mode import modal as _modal
+from one_mode import one_mode as _one_mode
 
 TR = fe.Trapezoid
-
-
-def _one_mode(alpha=0.0, mode=0):
-    """A linear cantilever (4 P1 hexahedra, 10 x 15 cm: no repeated frequency) and one of its
-    lumped-mass modes (dense eigh: exact to round-off). With mass-proportional damping alpha the
-    mode stays decoupled, zeta = alpha / (2 omega): a single damped oscillator in closed form."""
-    mesh = fe.beam_mesh(length=1.0, width=0.1, height=0.15, cells=(4, 1, 1))
-    model = fe.Model(mesh, density=1000.0, body=fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3)),
-                     fixed="left", damping=fe.Rayleigh(alpha=alpha) if alpha else None)
-    free = model.free
-    K = model.rest_stiffness.toarray()[np.ix_(free, free)]
-    w2, Q = sl.eigh(K, np.diag(model.lumped_mass[free]))
-    return model, math.sqrt(w2[mode]), Q[:, mode]
-
-
-def _modal(model, phi, s):
-    """(q, v) of ``s`` in the mass-normalised mode phi."""
-    free, m = model.free, model.lumped_mass[model.free]
-    return phi @ (m * (s.x[free] - model.X[free])), phi @ (m * s.v[free])
-
-
-def _in_mode(model, phi, q0, v0):
-    x, v = model.X.copy(), np.zeros(model.ndofs)
-    x[model.free] += q0 * phi
-    v[model.free] = v0 * phi
-    return fe.State(x, v)
 
 
 # -- order of accuracy ---------------------------------------------------------------------------

@@ -592,3 +592,30 @@ def warped_apply_p1(x, X, v, nodes, Dm_inv, V, prm, out):
             out[k2 + i] += f2
             out[k3 + i] += f3
             out[k0 + i] -= f1 + f2 + f3
+
+
+# det F of the vertex tets -----------------------------------------------------------
+@_jit
+def tet_volume_ratios(p, tets, ref_det, out):
+    """``out[e] = det(Ds) / det(Dm)`` of each tet, from vertex positions ``p`` ``(n, 3)``.
+
+    ``Ds``'s columns are the edges from vertex 0, in the order of operations of
+    :func:`fem_elastic.physics.inversion.det3` (the numpy path), so the two agree
+    to the last bit; one pass, no temporaries (the numpy path's gathers made the
+    per-step inversion watch cost more than a fused explicit step).
+    """
+    for e in range(tets.shape[1]):
+        i0, i1, i2, i3 = tets[0, e], tets[1, e], tets[2, e], tets[3, e]
+        a00 = p[i1, 0] - p[i0, 0]
+        a10 = p[i1, 1] - p[i0, 1]
+        a20 = p[i1, 2] - p[i0, 2]
+        a01 = p[i2, 0] - p[i0, 0]
+        a11 = p[i2, 1] - p[i0, 1]
+        a21 = p[i2, 2] - p[i0, 2]
+        a02 = p[i3, 0] - p[i0, 0]
+        a12 = p[i3, 1] - p[i0, 1]
+        a22 = p[i3, 2] - p[i0, 2]
+        det = (a00 * (a11 * a22 - a12 * a21)
+               - a01 * (a10 * a22 - a12 * a20)
+               + a02 * (a10 * a21 - a11 * a20))
+        out[e] = det / ref_det[e]

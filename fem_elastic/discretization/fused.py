@@ -60,7 +60,8 @@ from .space import Discretization
 from ..materials import LinearElastic, NeoHookean, StableNeoHookean, StVK
 from ..materials.base import Material
 
-__all__ = ["available", "kernels_for", "registry", "FusedP1", "MaterialKernels", "warped_apply"]
+__all__ = ["available", "kernels_for", "registry", "FusedP1", "MaterialKernels", "warped_apply",
+           "tet_volume_ratios"]
 
 #: Environment variable that switches the fused kernels off when set to ``0``.
 ENV = "FEM_ELASTIC_NUMBA"
@@ -329,4 +330,37 @@ def warped_apply(warped, x: np.ndarray, v: np.ndarray) -> np.ndarray:
     out = np.empty(g.ndofs)
     _kernels().warped_apply_p1(_readonly(x, g.ndofs, "x"), g.X, _readonly(v, g.ndofs, "v"),
                                g.nodes, g.Dm_inv, g.V, prm, out)
+    return out
+
+
+def tet_volume_ratios(p: np.ndarray, tets: np.ndarray, ref_det: np.ndarray):
+    """``det(Ds) / det(Dm)`` of every tet by the fused kernel, or None without it.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        ``(n_vertices, 3)`` vertex positions (m).
+    tets : numpy.ndarray
+        ``(4, n_tets)`` int64 vertex indices.
+    ref_det : numpy.ndarray
+        ``(n_tets,)`` determinants of the reference edge matrices (m^3).
+
+    Returns
+    -------
+    numpy.ndarray or None
+        ``(n_tets,)`` volume ratios (det F of a P1 tet); None when the fused kernels are
+        not available (the caller takes its numpy path, which gives the same bits).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> p = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 2]])
+    >>> r = tet_volume_ratios(p, np.arange(4).reshape(4, 1), np.array([1.0]))
+    >>> r is None or float(r[0]) == 2.0
+    True
+    """
+    if not available():
+        return None
+    out = np.empty(tets.shape[1])
+    _kernels().tet_volume_ratios(np.ascontiguousarray(p, dtype=float), tets, ref_det, out)
     return out
