@@ -275,8 +275,8 @@ def _demo(args) -> int:
     for o in outcomes:
         run = o.run
         body = run.info.get("body_spec") or spec["body"]
-        E, rho = float(body["E"]), float(body["density"])
-        beam = RectangularCantilever(length=L, width=b, height=h, E=E, nu=float(body["nu"]))
+        E, nu, rho = float(run.info["E"]), float(run.info["nu"]), float(body["density"])
+        beam = RectangularCantilever(length=L, width=b, height=h, E=E, nu=nu)
         w_timo = beam.distributed_load_timoshenko(rho * g * b * h)
         tip = _tip_vertices(run.model.mesh)
         w_end = -float(np.mean(o.trajectory.displacement[-1, tip, 2])) if o.trajectory is not None else float("nan")

@@ -553,8 +553,12 @@ class Scene:
         if body["type"] == "fem":
             from ..physics.elastic_body import ElasticBody
 
-            material = self._guard(path, MATERIALS[body["material"]], E=body["E"], nu=body["nu"])
-            return self._guard(path + ("order",), ElasticBody, material, order=body["order"])
+            if body.get("mu") is not None:  # Lame's pair: exact where nu = 0.4999999 loses digits
+                material = self._guard(path, MATERIALS[body["material"]], mu=body["mu"], lam=body["lam"])
+            else:
+                material = self._guard(path, MATERIALS[body["material"]], E=body["E"], nu=body["nu"])
+            return self._guard(path + ("order",), ElasticBody, material, order=body["order"],
+                               formulation=body.get("formulation", "displacement"))
         from ..physics.springs import MassSpring
 
         return self._guard(path, MassSpring, E=body["E"], nu=body["nu"],
@@ -647,12 +651,22 @@ class Scene:
         spec = self.spec
         if body["type"] == "fem":
             described = f'{MATERIALS[body["material"]].__name__} FEM, P{body["order"]} tets'
+            if body.get("formulation", "displacement") == "mixed":
+                described += " + pressure (mixed)"
             body_info = {"type": "fem", "material": body["material"], "order": body["order"]}
         else:
             described = f'mass-spring ({body["calibration"]} calibration)'
             body_info = {"type": "springs", "calibration": body["calibration"], "k_d": body["k_d"],
                          "order": 1}
-        body_info.update({"E": body["E"], "nu": body["nu"], "density": body["density"]})
+        if body.get("mu") is not None:
+            material = MATERIALS[body["material"]](mu=body["mu"], lam=body["lam"])
+            body_info.update({"mu": body["mu"], "lam": body["lam"]})
+        else:
+            material = None
+        body_info.update({"E": material.E if material else body["E"],
+                          "nu": material.nu if material else body["nu"], "density": body["density"]})
+        if body["type"] == "fem" and body.get("formulation", "displacement") != "displacement":
+            body_info["formulation"] = body["formulation"]
         g = spec["ground"]
         d = spec["damping"]
         return {

@@ -265,6 +265,35 @@ def _compare_rule(table: dict, path: tuple) -> dict:
 # the schema
 
 FEM, SPRINGS = {"type": ("fem",)}, {"type": ("springs",)}
+_E_ALIASES = ("young", "youngs_modulus", "young_modulus", "e_modulus", "youngs")
+
+
+def _body_rule(table: dict, path: tuple) -> dict:
+    """A finite-element body gives its elasticity as E and nu, or as mu and lam: one pair."""
+    if table["type"] != "fem":
+        return table
+    given = {k for k in ("E", "nu", "mu", "lam") if table.get(k) is not None}
+    if given == {"E", "nu"} or given == {"mu", "lam"}:
+        if given == {"mu", "lam"}:
+            from ..materials.base import elastic_constants
+
+            try:
+                elastic_constants(mu=table["mu"], lam=table["lam"], who="[body]")
+            except InvalidParameter as exc:
+                raise Invalid(path + ("lam",), str(exc)) from None
+        return table
+    if not given:
+        raise Invalid(path + ("E",), "missing required key E: Young's modulus (Pa), e.g. E = 2e7, "
+                                     "with nu = 0.3 (or give mu and lam, both in Pa).")
+    pair = ("mu", "lam") if given & {"mu", "lam"} and not given & {"E", "nu"} else ("E", "nu")
+    if given & {"E", "nu"} and given & {"mu", "lam"}:
+        raise Invalid(path + (sorted(given & {"mu", "lam"})[0],),
+                      f"[body] gives {', '.join(sorted(given))}: give E and nu, or mu and lam, "
+                      "not both (two pairs can contradict each other).")
+    lacking = [k for k in pair if k not in given][0]
+    raise Invalid(path + (lacking,), f"missing required key {lacking}: {pair[0]} needs {pair[1]} "
+                                     f"(give E and nu, or mu and lam).")
+
 
 BODY = Table(
     "body",
@@ -274,10 +303,19 @@ BODY = Table(
             default_text="the body type"),
         Key("material", Choice(tuple(MATERIALS)), REQUIRED, when=FEM,
             doc="hyperelastic material", default_text='"neo_hookean"'),
-        Key("E", Number(gt=0), REQUIRED, "Pa", "Young's modulus", aliases=("young", "youngs_modulus",
-            "young_modulus", "e_modulus", "youngs"), default_text="2e7"),
-        Key("nu", Number(gt=-1, lt=0.5), REQUIRED, doc="Poisson's ratio", when=FEM,
+        Key("E", Number(gt=0), ABSENT, "Pa", "Young's modulus (or give mu and lam instead of E "
+            "and nu)", when=FEM, aliases=_E_ALIASES, default_text="2e7"),
+        Key("E", Number(gt=0), REQUIRED, "Pa", "Young's modulus", when=SPRINGS, aliases=_E_ALIASES,
+            default_text="2e7"),
+        Key("nu", Number(gt=-1, lt=0.5), ABSENT, doc="Poisson's ratio (or give mu and lam)", when=FEM,
             aliases=("poisson", "poisson_ratio", "poissons_ratio"), default_text="0.3"),
+        Key("mu", Number(gt=0), ABSENT, "Pa", "shear modulus, with lam instead of E and nu: exact "
+            "for a nearly incompressible body, where nu = 0.4999999 loses digits", when=FEM,
+            aliases=("shear_modulus", "G")),
+        Key("lam", Number(), ABSENT, "Pa", "Lame's first parameter, with mu", when=FEM,
+            aliases=("lambda", "lame")),
+        Key("formulation", Choice(("displacement", "mixed")), "displacement", when=FEM,
+            doc='"mixed": displacement-pressure (order = 2), locking-free near nu = 0.5'),
         Key("nu", Number(gt=-1, lt=0.5), 0.25, doc="Poisson's ratio, the calibration's target "
             "(a spring network has 1/4 built in)", when=SPRINGS,
             aliases=("poisson", "poisson_ratio", "poissons_ratio")),
@@ -289,6 +327,7 @@ BODY = Table(
         Key("k_d", Number(ge=0), 0.0, "N s/m", "damping along each spring", when=SPRINGS),
     ),
     "The body: a material on finite elements, or a mass-spring network.",
+    rule=_body_rule,
 )
 
 INTEGRATOR = Table(
