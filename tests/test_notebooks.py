@@ -44,6 +44,12 @@ EXPECTED = {
          "Linearized implicit Euler"],
         3,
     ),
+    "position_based_vs_fem.ipynb": (
+        ["PBD's stiffness is not a material constant", "XPBD converges to implicit Euler on the same energy",
+         "Shape matching", "its shape is not the material's", "Projective dynamics",
+         "converges linearly to the implicit-Euler step"],
+        4,
+    ),
 }
 
 

@@ -57,15 +57,19 @@ def test_quick_sweep_covers_every_problem_with_unique_ids():
     cases = accuracy_cases(quick=True)
     ids = [c.id for c in cases]
     assert len(set(ids)) == len(ids)
-    assert {c.params["problem"] for c in cases} == set(PROBLEMS)
+    # the methods of issue 16 are their own problem (tests/test_study_accuracy_methods.py)
+    assert {c.params["problem"] for c in cases} == set(PROBLEMS) | {"methods"}
     assert SUBSET <= set(ids)
     json.dumps([c.params for c in cases])  # JSON-able
     full = accuracy_cases(quick=False)
     assert len(full) > 3 * len(cases)
     integrators = {c.params.get("integrator") for c in full if c.params["problem"] == "dynamic"}
+    assert {c.params["method"] for c in full if c.params["problem"] == "methods"} == {
+        "Trapezoid", "VelocityVerlet", "PBD", "XPBD", "XPBD edge_volume", "ShapeMatching", "ProjectiveDynamics"}
     assert integrators == {"ExplicitEuler", "SymplecticEuler", "Midpoint", "RK4", "ImplicitEuler",
                            "LinearizedImplicitEuler", "Newmark"}
-    assert {c.params["body"] for c in full} == {"springs", "linear", "corotated", "stvk", "neo_hookean"}
+    assert {c.params["body"] for c in full if c.params["problem"] != "methods"} == {
+        "springs", "linear", "corotated", "stvk", "neo_hookean"}
 
 
 def test_outputs_are_well_formed(study):

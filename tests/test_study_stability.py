@@ -17,6 +17,7 @@ import pytest
 import fem_elastic as fe
 from fem_elastic.study import stability as st
 from fem_elastic.study import stability_cases as sc
+from fem_elastic.study import stability_methods as sm
 from fem_elastic.study import stability_run as sr
 
 # The subset of the quick study that the tests run.
@@ -53,7 +54,8 @@ def test_case_lists():
     for cases in (full, quick):
         ids = [c.id for c in cases]
         assert len(set(ids)) == len(ids)
-        assert {c.params["integrator"] for c in cases} == set(st.INTEGRATORS)
+        assert {c.params["integrator"] for c in cases if c.params["kind"] != "methods"} == set(st.INTEGRATORS)
+        assert {c.params["integrator"] for c in cases if c.params["kind"] == "methods"} == set(sm.METHODS)
         assert {c.params["case"] for c in cases if c.params["kind"] == "extreme"} == set(sc.EXTREME_CASES)
         json.dumps([c.params for c in cases])  # the executor needs JSON-able params
     assert _IDS <= {c.id for c in quick}

@@ -51,6 +51,14 @@ Problems and references
     ``reference`` run (Newmark, many steps per period) also gives each
     scheme's own error.
 
+``methods`` (the dynamic beam, P1)
+    Trapezoid, velocity Verlet, PBD, XPBD, shape matching and projective
+    dynamics on a static sag, the first-mode period and a large deflection,
+    each against the converged FEM answer on the same mesh for the energy it
+    approximates, each swept over its own knob (dt, iterations, substeps or
+    clusters): :mod:`~fem_elastic.study.accuracy_methods`. Its rows have their
+    own report section and figure (``methods_error_vs_time.png``).
+
 Each row has ``rel_error`` (signed, relative), ``abs_error`` = ``|rel_error|``,
 ``seconds_solve`` (s, wall time of the solve, eigen-solve or simulation only:
 the mesh, the model and the initial state are built outside it; a solve under
@@ -90,6 +98,7 @@ from pathlib import Path
 
 from .accuracy_analysis import _postprocess, _public, candidates, error_floor
 from .accuracy_cases import BODIES, INTEGRATORS, PROBLEMS, accuracy_cases, prony_frequency, run_accuracy_case
+from .accuracy_methods import METHODS, plot_methods
 from .accuracy_plots import plot_error_vs_time
 from .accuracy_report import BUDGETS, write_report
 from .executor import run_sweep
@@ -120,6 +129,8 @@ __all__ = [
     "PROBLEMS",
     "BODIES",
     "INTEGRATORS",
+    "METHODS",
+    "plot_methods",
     "BUDGETS",
 ]
 
@@ -172,5 +183,6 @@ def run_accuracy_study(out_dir, *, quick: bool = False, executor=None, workers=N
     _postprocess(rows)
     return finish_study("accuracy study", rows, out_dir, t0=t0, n_run=rows.n_run, quick=quick,
                         table=_public(rows),
-                        figures=lambda: [(plot_error_vs_time(rows), "error_vs_time.png")],
+                        figures=lambda: [(plot_error_vs_time(rows), "error_vs_time.png"),
+                                         (plot_methods(rows), "methods_error_vs_time.png")],
                         write_report=write_report)

@@ -107,12 +107,14 @@ def accuracy_cases(quick: bool = False) -> list[Case]:
     list of Case
         Ids like ``static_tip/neo_hookean/P2/20x1x1`` or
         ``dynamic/linear/P2/10x1x1/RK4/c0.9``; params hold everything the case
-        needs (geometry, material constants, loads, method).
+        needs (geometry, material constants, loads, method). Then the
+        ``methods/...`` cases of :mod:`~fem_elastic.study.accuracy_methods`
+        (trapezoid, Verlet, PBD, XPBD, shape matching, projective dynamics).
 
     Examples
     --------
     >>> cases = accuracy_cases(quick=True)
-    >>> sorted({c.params["problem"] for c in cases}) == sorted(PROBLEMS)
+    >>> sorted({c.params["problem"] for c in cases}) == sorted(PROBLEMS + ("methods",))
     True
     """
     if quick:
@@ -187,7 +189,9 @@ def accuracy_cases(quick: bool = False) -> list[Case]:
         for n in lin_n:
             add("linearized", body, order, cells, stocky, f"N{n}", integrator="LinearizedImplicitEuler",
                 steps_per_period=n, sample_every=1, alpha=ALPHA_RELEASE, periods=1.0)
-    return cases
+    from .accuracy_methods import method_accuracy_cases  # the methods of issue 16 against converged FEM
+
+    return cases + method_accuracy_cases(quick)
 
 
 # --- one case ------------------------------------------------------------------------------
@@ -469,8 +473,14 @@ def _warm_up() -> None:
     logger.debug("warm-up in %.2f s", time.perf_counter() - t0)
 
 
+def _methods(p) -> dict:
+    from .accuracy_methods import run_method_accuracy_case
+
+    return run_method_accuracy_case(p)
+
+
 _RUNNERS = {"static_tip": _static, "self_weight": _static, "large_deflection": _static, "modal": _modal,
-            "dynamic": _dynamic, "linearized": _linearized}
+            "dynamic": _dynamic, "linearized": _linearized, "methods": _methods}
 
 
 def run_accuracy_case(params: dict) -> dict:
@@ -490,6 +500,7 @@ def run_accuracy_case(params: dict) -> dict:
         and leaves the errors None.
     """
     if params.get("problem") not in _RUNNERS:
-        raise InvalidParameter(f"problem must be one of {PROBLEMS}, got {params.get('problem')!r}")
-    _warm_up()
+        raise InvalidParameter(f"problem must be one of {PROBLEMS + ('methods',)}, got {params.get('problem')!r}")
+    if params["problem"] != "methods":  # those warm up their own methods
+        _warm_up()
     return _RUNNERS[params["problem"]](params)

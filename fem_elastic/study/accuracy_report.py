@@ -360,5 +360,8 @@ def write_report(rows, path, *, quick: bool, wall_time: float | None = None, n_r
         out += ["", "### LinearizedImplicitEuler against ImplicitEuler", "",
                 markdown_table(["method", "steps per period", "dt (s)", "gap LIE vs IE", "IE vs reference",
                                 "LIE vs reference", "IE time", "LIE time"], lin_table)]
+    from .accuracy_methods import methods_report_lines
+
+    out += methods_report_lines(rows)
     out += ["", "## All runs", "", f"{n_ok} of {len(rows)} runs completed.", "", _results_table(rows), ""]
     return write_text_atomic(Path(path), "\n".join(out))

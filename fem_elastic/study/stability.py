@@ -22,6 +22,12 @@
     10 % and release, a 720-degree twist and release, a drop onto the
     ground at 20 m/s, nearly flat (sliver) elements, and a degenerate sliver
     mesh that validation must reject.
+``methods``
+    The methods of issue 16 (trapezoid, velocity Verlet, PBD, XPBD, shape
+    matching, projective dynamics) on four hard scenes: stiff steel at
+    dt = 1/30 s, near-incompressible, crush, huge steps
+    (:mod:`fem_elastic.study.stability_methods`, which also says how their
+    verdicts are judged).
 
 A fixed number of steps, not a fixed duration
 ---------------------------------------------

@@ -215,6 +215,9 @@ def write_report(rows, path, *, quick: bool = False, wall_time: float | None = N
         if rejected:
             lines += [f"Rejected at setup ({len(rejected)} runs), e.g.: {rejected[0].get('reason')}", ""]
 
+    from .stability_methods import methods_report_lines
+
+    lines += methods_report_lines(rows)
     lines += ["## Conclusions", ""]
     lines += [f"- {c}" for c in conclusions(rows)] or ["- (no runs)"]
     lines += [""]

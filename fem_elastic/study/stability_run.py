@@ -82,10 +82,22 @@ def _energy_figures(scene, traj):
     }
 
 
-def _simulate(scene, integrator_name, dt, steps, work_limit=WORK_LIMIT):
-    """Run one scene; the verdict and the run's figures as a dict."""
+class _Unbounded(Exception):
+    def __init__(self, step, u):
+        super().__init__(step)
+        self.step, self.u = step, u
+
+
+def _simulate(scene, integrator_name, dt, steps, work_limit=WORK_LIMIT, *, integrator=None,
+              energy_growth=1.0, displacement_limit=math.inf):
+    """Run one scene; the verdict and the run's figures as a dict.
+
+    ``integrator`` (default: a new ``integrator_name``), ``energy_growth`` (the blow-up
+    watch's bound, :func:`fe.simulate`) and ``displacement_limit`` (m: a larger displacement
+    is a divergence) serve the methods rows (:mod:`~fem_elastic.study.stability_methods`).
+    """
     model, state = scene.model, scene.state
-    integ = _integrator(integrator_name)
+    integ = _integrator(integrator_name) if integrator is None else integrator
     tets = np.asarray(model.mesh.t).T
     volumes0 = _signed_volumes(np.asarray(model.mesh.p, dtype=float).T, tets)
     jmin = _min_J(model, state.x, tets, volumes0)
@@ -96,6 +108,8 @@ def _simulate(scene, integrator_name, dt, steps, work_limit=WORK_LIMIT):
         nonlocal jmin, umax, work
         jmin = min(jmin, _min_J(model, s.x, tets, volumes0))
         umax = max(umax, float(np.abs(s.x - model.X).max()))
+        if not umax <= displacement_limit:
+            raise _Unbounded(k, umax)
         st = integ.last_stats
         work += st.newton_iterations + st.line_search_cuts
         if work > work_limit:
@@ -109,13 +123,16 @@ def _simulate(scene, integrator_name, dt, steps, work_limit=WORK_LIMIT):
         warnings.simplefilter("ignore", RuntimeWarning)
         try:
             traj = simulate(model, integ, dt, steps=steps, state=state, check_stability=False,
-                            callback=watch)
+                            callback=watch, energy_growth=energy_growth)
             out.update(verdict="stable", step=None, reason="")
         except Diverged as err:
             traj = err.trajectory
             out.update(verdict=_classify(err), step=err.step, reason=err.reason or str(err))
         except NotConverged as err:
             out.update(verdict="newton failed", step=None, reason=str(err))
+        except _Unbounded as err:
+            out.update(verdict="diverged", step=err.step,
+                       reason=f"displacement {err.u:.3g} m past the limit of {displacement_limit:.3g} m")
         except _WorkLimit as err:
             out.update(verdict="work limit", step=err.step,
                        reason=f"stopped after {work} Newton iterations and line-search cuts "
@@ -182,6 +199,10 @@ def run_stability_case(params: dict) -> dict:
     ('stable', None, True)
     """
     kind = params["kind"]
+    if kind == "methods":
+        from .stability_methods import run_method_case
+
+        return run_method_case(params, _simulate)
     scene, rejected = _build(params)
     if rejected is not None:
         return rejected

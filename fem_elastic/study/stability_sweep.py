@@ -115,12 +115,15 @@ def study_cases(quick: bool = False) -> list:
         scene), ``integrator``, ``body``, ``E`` (Pa), ``nu``, ``dt`` (s; None
         for a critical case and for an explicit extreme run, whose dt is
         1 / omega_max of the scene) and ``steps`` (None: the scene's duration).
+        Last, the ``kind = "methods"`` cases (the methods of issue 16, the same in
+        both sweeps; :func:`fem_elastic.study.stability_methods.method_cases`), whose
+        ``integrator`` is a label of :data:`~fem_elastic.study.stability_methods.METHODS`.
 
     Examples
     --------
     >>> cases = study_cases(quick=True)
     >>> sorted({c.params["kind"] for c in cases}), len(cases)
-    (['critical', 'extreme', 'sweep'], 78)
+    (['critical', 'extreme', 'methods', 'sweep'], 106)
     """
     sweep, critical, extreme = [], [], []
     for integ in INTEGRATORS:
@@ -150,7 +153,9 @@ def study_cases(quick: bool = False) -> list:
     # the long runs first, so that a process pool ends on short ones
     implicit = [c for c in sweep if c.params["integrator"] not in EXPLICIT]
     cases = implicit + extreme + critical + [c for c in sweep if c.params["integrator"] in EXPLICIT]
-    return cases
+    from .stability_methods import method_cases
+
+    return cases + method_cases()
 
 
 def _extreme_points(quick: bool):
