@@ -36,3 +36,61 @@ def test_ci_runs_the_readme_commands():
     # .ci/run spells the README's one-liner out step by step: each step must be there
     for step in setup_test.split(" && "):
         assert step in ci, f"README step {step!r} is not what .ci/run runs"
+
+
+def _bash_commands():
+    """Every command of the README's ```bash blocks (comments dropped, && chains split)."""
+    commands = []
+    for block in re.findall(r"```bash\n(.*?)```", README, re.S):
+        for line in block.splitlines():
+            line = line.split("#", 1)[0].strip()
+            commands += [c.strip() for c in line.split("&&") if c.strip()]
+    return commands
+
+
+def test_readme_commands_run_from_the_venv_without_activating_it():
+    # the set-up commands create .venv and never activate it, so a command after them must
+    # name .venv/bin/...: a bare `python`, `pip` or `fem-elastic` is another interpreter or
+    # not on PATH at all
+    commands = _bash_commands()
+    assert len(commands) >= 8
+    for command in commands:
+        assert command.startswith((".venv/bin/", "python3 -m venv .venv")), command
+    # inline commands in the prose; the bad-inputs table quotes error messages, not commands
+    prose = re.sub(r"<!-- bad-inputs:start -->.*<!-- bad-inputs:end -->", "", README, flags=re.S)
+    spans = re.findall(r"`([^`\n]+)`", prose)
+    for span in spans:
+        assert not re.match(r"(python|pip)3? ", span) or span.startswith("python3 -m venv"), (
+            f"README names `{span}`: write .venv/bin/python or .venv/bin/pip")
+
+
+def test_ci_docs_builds_what_the_readme_says():
+    docs = [c for c in _bash_commands() if "sphinx-build" in c or '".[docs]"' in c]
+    assert len(docs) == 2, docs
+    script = (ROOT / ".ci" / "docs").read_text()
+    for step in docs:
+        assert step in script, f"README step {step!r} is not what .ci/docs runs"
+    assert " -W " in docs[-1], "the docs build must turn warnings into errors"
+    pyproject = (ROOT / "pyproject.toml").read_text()
+    assert re.search(r"^docs = \[.*sphinx", pyproject, re.M), "pyproject.toml has no docs extra"
+
+
+def test_readme_scene_is_a_valid_scene():
+    import fem_elastic as fe
+
+    (toml,) = re.findall(r"```toml\n(.*?)```", README, re.S)
+    scene = fe.parse_scene(toml, source="README.md", base_dir=ROOT / "scenes")
+    built = scene.build()
+    assert [b.name for b in built] == scene.variants and len(built) == 2  # the body + [[compare]]
+    assert built[0].steps == 180  # 3 s at dt = 1/60 s
+
+
+def test_readme_meshes_and_scripts_exist():
+    # every file the README names for the user to open or run is in the repository
+    named = r"(?<![\w/.])((?:meshes|scenes|scripts|notebooks|examples|docs)/[\w./-]+\.\w+)"
+    for path in set(re.findall(named, README)):
+        assert (ROOT / path).exists(), f"README names {path}, which is not in the repository"
+    import fem_elastic as fe
+
+    blob = fe.load_mesh(ROOT / "meshes" / "blob.vtu")
+    assert set(blob.boundaries) == {"bottom"}  # what the README says of it

@@ -146,7 +146,7 @@ class ElasticPotential(Potential):
         """Absolute round-off of :meth:`energy` near the rest state (J).
 
         psi is evaluated from F, whose entries carry an absolute error of
-        about eps, so each term of psi (of size ~ (mu + lam) |F|^2) carries
+        about eps, so each term of psi (of size ``~ (mu + lam) |F|^2``) carries
         ~ eps (mu + lam); the energy differences a line search compares fall
         below this long before the gradient does. Summed over the volume,
         with a factor 3 for the three diagonal entries of F.
@@ -175,7 +175,7 @@ class ElasticPotential(Potential):
         absolute error of about eps; the material subtracts I again (in
         eps = sym F - I, in F - F^-T, ...), so each stress component carries
         ~ eps (2 mu + lam) whatever the load. Through the force contraction
-        this gives eps (2 mu + lam) sum_q |dN_a| dx per DOF (times
+        this gives ``eps (2 mu + lam) sum_q |dN_a| dx`` per DOF (times
         :meth:`_offset_factor` for a body far from the origin). For a stiff
         material under a small load this floor lies above rtol ||f_ext||, and
         no iterate can do better: Newton stops when it reaches it.

@@ -457,7 +457,7 @@ def van_gelder_stiffness(mesh, E: float, nu: float = SPRING_POISSON_RATIO) -> np
 def lloyd_stiffness(mesh, E: float, nu: float = SPRING_POISSON_RATIO) -> np.ndarray:
     """Spring constants fitted per tet to the linear FEM stiffness (after Lloyd et al. 2007).
 
-    For each tet t, the six constants ``k^t`` minimise the Frobenius norm
+    For each tet t, the six constants ``k^t`` minimise the Frobenius norm::
 
         || sum_{e in t} k^t_e S_e - K_t ||_F,
 
@@ -465,7 +465,7 @@ def lloyd_stiffness(mesh, E: float, nu: float = SPRING_POISSON_RATIO) -> np.ndar
     (Lame mu, lam from E and nu) and ``S_e`` the 12x12 matrix of a unit
     spring on edge e at rest (blocks ``+-n n^T``). The normal equations are
     ``G k^t = b`` with ``G_ee = 4``, ``G_ef = (n_e . n_f)^2`` for edges that
-    share a vertex, 0 for opposite edges, and
+    share a vertex, 0 for opposite edges, and::
 
         b_e = <S_e, K_t> = V_t [mu (|g|^2 + (n . g)^2) + lam (n . g)^2],
         g = grad N_j - grad N_i  (so n . g = 2 / l0).

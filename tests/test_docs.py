@@ -1,0 +1,79 @@
+"""The documentation's examples run and say what they claim.
+
+Each ``examples/plot_*.py`` (the docs gallery) runs here in quick mode
+(``FEM_ELASTIC_QUICK=1``: coarse meshes, short runs) in a subprocess, off-screen, and must exit
+0: every example asserts its own physical checks (beam theory, reactions, energy behaviour,
+convergence), and this test checks the key lines it prints. The Sphinx build itself is too
+slow for the default run on 2 cores; ``.ci/docs`` builds the site with warnings as errors.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLES = sorted((ROOT / "examples").glob("plot_*.py"))
+
+# what each example must print (a regex on its stdout), beyond exiting 0 after its asserts
+EXPECTED = {
+    "plot_cantilever_beam_theory.py": r"P2,\s+16 cells along: tip .* 0\.98\d x Timoshenko",
+    "plot_rollers_reactions.py": r"reaction on the pulled face: \[100\.\s+0\.\s+0\.\] N",
+    "plot_neohookean_drop.py": r"first contact at t = 0\.10 s",
+    "plot_integrators_compared.py": r"implicit Euler .* energy\s+-\d\d\.\d\d %",
+    "plot_pbd_xpbd_vs_fem.py": r"200 iterations: XPBD tip .* field\s+\d\.\d %",
+    "plot_scene_from_python.py": r"fem_p2 .* static\s+3\.9\d\d cm",
+    "plot_modal_analysis.py": r"mode 1:\s+4\d\.\d\d Hz\s+1\.0[01]\d x Euler-Bernoulli",
+    "plot_user_energy.py": r"generated vs hand-written Neo-Hookean: \d\.\de-1\d",
+}
+
+
+def test_every_example_has_an_expectation():
+    names = {p.name for p in EXAMPLES}
+    assert len(names) >= 6, "the gallery needs 6-10 examples"
+    assert names == set(EXPECTED), f"examples and EXPECTED differ: {names ^ set(EXPECTED)}"
+
+
+def test_gallery_header_and_titles():
+    assert (ROOT / "examples" / "README.rst").is_file()  # sphinx-gallery's index needs it
+    for path in EXAMPLES:
+        text = path.read_text()
+        # sphinx-gallery takes the title from the module docstring's first underlined line
+        head = re.match(r'"""\n(.+)\n(=+)\n', text)
+        assert head and len(head.group(2)) >= len(head.group(1)), f"{path.name}: no title"
+        assert "FEM_ELASTIC_QUICK" in text, f"{path.name} has no quick mode"
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
+def test_example_runs_in_quick_mode(path, tmp_path):
+    env = dict(os.environ, FEM_ELASTIC_QUICK="1", MPLBACKEND="Agg", PYVISTA_OFF_SCREEN="true",
+               OMP_NUM_THREADS="1")
+    proc = subprocess.run([sys.executable, str(path)], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, f"{path.name} failed:\n{proc.stdout}\n{proc.stderr[-3000:]}"
+    assert re.search(EXPECTED[path.name], proc.stdout), (
+        f"{path.name} did not print {EXPECTED[path.name]!r}:\n{proc.stdout}")
+    assert not list(tmp_path.iterdir()), "an example wrote files into its working directory"
+
+
+PAGES = sorted((ROOT / "docs").rglob("*.md"))
+PAGES = [p for p in PAGES if "_build" not in p.parts and re.search(r"```python\n", p.read_text())]
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT / "docs")))
+def test_python_blocks_of_the_guide_run(page, monkeypatch):
+    # the site's pages say their commands run from the repository root: run them there
+    monkeypatch.chdir(ROOT)
+    namespace: dict = {}
+    for block in re.findall(r"```python\n(.*?)```", page.read_text(), re.S):
+        exec(compile(block, str(page), "exec"), namespace)
+
+
+def test_guide_pages_have_python_to_run():
+    names = {p.name for p in PAGES}
+    assert {"getting_started.md", "materials.md", "scenes.md"} <= names
