@@ -17,6 +17,9 @@ __all__ = [
     "Diverged",
     "MissingDependency",
     "StepFailed",
+    "OutputInUse",
+    "WriteFailed",
+    "ResourceLimit",
 ]
 
 
@@ -122,3 +125,56 @@ class StepFailed(Diverged):
         super().__init__(message, step=step, time=time, reason=reason,
                          last_good_state=last_good_state, trajectory=trajectory)
         self.original = original
+
+
+class OutputInUse(InvalidParameter):
+    """Another process writes into the output directory (it holds the directory's lock).
+
+    Attributes
+    ----------
+    pid : int or None
+        The process id of the holder, as it wrote it in the lock file.
+    """
+
+    def __init__(self, message: str, pid=None):
+        super().__init__(message)
+        self.pid = pid
+
+
+class WriteFailed(FemElasticError, OSError):
+    """An output file could not be written whole (a full disk, a file size limit, a closed pipe).
+
+    Nothing truncated is left under the final name: the file is written to a
+    temporary name and renamed only once it is whole. An :class:`OSError`
+    too, so ``except OSError`` still catches it.
+
+    Attributes
+    ----------
+    path : str
+        The file that was being written.
+    """
+
+    def __init__(self, message: str, path=None):
+        FemElasticError.__init__(self, message)
+        self.path = None if path is None else str(path)
+        self.filename = self.path
+
+    def __str__(self) -> str:
+        return self.args[0] if self.args else ""
+
+
+class ResourceLimit(InvalidParameter):
+    """A model (or its output) would need more memory or disk than the machine has free.
+
+    Raised before the work starts, with the estimate and what is free.
+
+    Attributes
+    ----------
+    needed, available : float
+        The estimate and what is free (bytes).
+    """
+
+    def __init__(self, message: str, needed=None, available=None):
+        super().__init__(message)
+        self.needed = needed
+        self.available = available

@@ -3,15 +3,20 @@
 Every file the package writes (meshes, VTU frames, summaries, checkpoints,
 study results) goes through :func:`_atomic_write`: a temporary file in the
 same directory, flushed and fsync'ed, then ``os.replace`` over the final
-name, then the directory fsync'ed so the rename is durable. A foundation
-module beside :mod:`fem_elastic.errors`: it imports nothing of the package.
+name, then the directory fsync'ed so the rename is durable. A write that
+fails (a full disk, a size limit) is a :class:`fe.WriteFailed` naming the
+file, and leaves nothing under the final name. A foundation module beside
+:mod:`fem_elastic.errors`: it imports nothing else of the package.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from pathlib import Path
+
+from .errors import WriteFailed
 
 __all__ = ["write_text_atomic"]
 
@@ -46,9 +51,16 @@ def _atomic_write(path: Path, write) -> Path:
     The temporary file is fsync'ed before ``os.replace`` so that the rename
     never exposes a file whose bytes are not on disk yet; on any error
     (KeyboardInterrupt included) it is removed and ``path`` is left as it was.
+    An :class:`OSError` while writing (a full disk, a file size limit, an I/O
+    error) becomes :class:`fem_elastic.errors.WriteFailed`, which names the file.
     """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except FileNotFoundError:  # no such directory: the caller's path, as it was
+        raise
+    except OSError as exc:
+        raise write_failed(path, exc) from exc
     os.close(fd)
     try:
         write(tmp)
@@ -57,11 +69,30 @@ def _atomic_write(path: Path, write) -> Path:
             os.fsync(fh.fileno())
         os.chmod(tmp, _new_file_mode(path))  # mkstemp makes it owner-only (0600)
         os.replace(tmp, path)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, WriteFailed):
+            raise
+        raise write_failed(path, exc) from exc
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     _fsync_directory(path.parent)
     return path
+
+
+def write_failed(path, exc: BaseException) -> WriteFailed:
+    """The :class:`WriteFailed` for ``path`` after ``exc``: what happened, and what to do."""
+    reason = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+    code = getattr(exc, "errno", None)
+    advice = {errno.ENOSPC: "free some space on that disk or write elsewhere",
+              errno.EFBIG: "the file is larger than this process may write (ulimit -f): raise the limit "
+                           "or write less (fewer frames)",
+              errno.EDQUOT: "your disk quota is used up: free some space or write elsewhere",
+              errno.EACCES: "check the directory's permissions", errno.EROFS: "write to another directory",
+              }.get(code, "check the disk and the path")
+    return WriteFailed(f"cannot write {path}: {reason}; nothing was left under that name ({advice}).",
+                       path=path)
 
 
 def write_text_atomic(path, text: str) -> Path:

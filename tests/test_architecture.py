@@ -24,7 +24,8 @@ ROOT = PACKAGE.parent
 
 #: the layers, lowest first: a module may import its own subpackage and any lower rank
 RANK = {
-    "errors": 0, "files": 0, "_compat": 0,   # foundation: imports nothing of the package
+    "errors": 0, "_compat": 0,               # foundation: imports nothing of the package
+    "files": 0.5, "resources": 0.5,          # foundation too, raising the typed errors of `errors`
     "geometry": 1, "materials": 1,           # side by side: neither imports the other
     "discretization": 2,
     "physics": 3,

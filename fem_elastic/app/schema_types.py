@@ -229,11 +229,14 @@ class Integer(Type):
 
     ge: int | None = None
     choices: tuple = ()
+    le: int | None = None
 
     @property
     def label(self) -> str:
         if self.choices:
             return " | ".join(str(c) for c in self.choices)
+        if self.ge is not None and self.le is not None:
+            return f"integer from {self.ge} to {self.le}"
         return "integer" + (f" >= {self.ge}" if self.ge is not None else "")
 
     def check(self, value, path, unit=""):
@@ -248,6 +251,8 @@ class Integer(Type):
             raise Invalid(path, f"{name} = {value} is not allowed: it must be {self.label}.")
         if self.ge is not None and value < self.ge:
             raise Invalid(path, f"{name} = {value} is out of range: it must be >= {self.ge}{_unit(unit)}.")
+        if self.le is not None and value > self.le:
+            raise Invalid(path, f"{name} = {value} is out of range: it must be <= {self.le}{_unit(unit)}.")
         return value
 
 

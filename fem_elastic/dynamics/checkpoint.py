@@ -31,6 +31,14 @@ only the first records it counts are read back: a crash mid-write leaves a
 longer file whose tail is ignored and cut off by the next write. So the
 history is written once, not again at every checkpoint.
 
+Each checkpoint records the CRC-32 of the bytes it counts in each appended
+file (``crc32`` in its description; ``checkpoint.npz`` itself is a zip whose
+members carry their own CRC-32), and reading it back checks them: a frame
+record changed on disk, a file cut short (torn) or replaced, a file in
+another encoding is a typed error that names the file and says to start the
+run afresh, never a resume from altered data. (Checkpoints written before the
+checksums are read without that check.)
+
 Examples
 --------
 >>> import tempfile
@@ -50,6 +58,8 @@ from __future__ import annotations
 
 import hashlib
 import io as _io
+import zipfile
+import zlib
 import json
 import logging
 import math
@@ -61,7 +71,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InvalidParameter
-from ..files import _atomic_write
+from ..files import _atomic_write, write_failed
 from .state import State
 from .trajectory import COUNT_FIELDS, STEP_FIELDS, Trajectory
 
@@ -165,7 +175,7 @@ def run_fingerprint(model, integrator, h, n_steps, record_every, state0, energy_
     return {
         "ndofs": int(model.ndofs),
         "body": _describe(model.body),
-        "density": float(model.density).hex(),
+        "density": _describe(model.density),  # a float's hex; a fe.MultiBody's: one per body
         "terms": [type(p).__name__ for p in model.potentials],
         "damping": _describe(model.damping),
         "obstacles": [_describe(o) for o in model.obstacles],
@@ -222,6 +232,9 @@ class Checkpoint:
         Time step (s).
     cuts_bytes : int
         Bytes of ``cuts.jsonl`` that belong to this checkpoint.
+    crc32 : dict of str to int
+        CRC-32 of the bytes of each appended file that belong to this checkpoint
+        (checked when it was read).
     """
 
     directory: Path
@@ -242,6 +255,7 @@ class Checkpoint:
     cuts_bytes: int = 0
     work: float = 0.0
     work_abs: float = 0.0
+    crc32: dict = field(default_factory=dict)
 
     @property
     def complete(self) -> bool:
@@ -335,9 +349,11 @@ def load_checkpoint(directory) -> Checkpoint:
         n_frames, step, n_cuts, cuts_bytes = (int(meta[k]) for k in ("n_frames", "step", "n_cuts", "cuts_bytes"))
         frame_size, n_steps, driving = int(meta["frame_size"]), int(meta["n_steps"]), bool(meta["driving"])
         fingerprint, dt = meta["fingerprint"], float.fromhex(meta["fingerprint"]["dt"])
+        recorded = {str(k): int(v) for k, v in meta.get("crc32", {}).items()}
     except _OldStepFields as old:
         raise InvalidParameter(str(old)) from None
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, EOFError, zlib.error,
+            zipfile.BadZipFile) as exc:  # a torn or altered zip: its members' CRC-32 fails
         raise InvalidParameter(
             f"the checkpoint {path} cannot be read ({type(exc).__name__}: {exc}); remove the "
             "directory to start the run afresh."
@@ -345,18 +361,34 @@ def load_checkpoint(directory) -> Checkpoint:
     integ = {k[len("integrator/"):]: a for k, a in arrays.items() if k.startswith("integrator/")}
     frames = _read_records(d / FRAMES_NAME, n_frames, frame_size)
     steps = _read_records(d / STEPS_NAME, step, len(STEP_FIELDS))
+    crc = {FRAMES_NAME: zlib.crc32(frames.astype("<f8").tobytes()),
+           STEPS_NAME: zlib.crc32(steps.astype("<f8").tobytes())}
+    _check_crc(d, crc, recorded)  # before any value read is used
     stats = {}
     for i, name in enumerate(STEP_FIELDS):
         col = steps[:, i]
         stats[name] = col.astype(np.int64) if name in COUNT_FIELDS else col.copy()
-    cuts = _read_cuts(d / CUTS_NAME, n_cuts, cuts_bytes)
+    cuts, crc[CUTS_NAME] = _read_cuts(d / CUTS_NAME, n_cuts, cuts_bytes)
+    _check_crc(d, crc, recorded)
     return Checkpoint(
         directory=d, step=step, n_steps=n_steps, state=State(x, v, t),
         integrator_state=integ, fingerprint=fingerprint, e_ref=e_ref, scale=scale,
         driving=driving, wall_time=wall, frames=frames, step_stats=stats, cuts=cuts,
         integrator=fingerprint.get("integrator", ""), dt=dt, cuts_bytes=cuts_bytes,
-        work=work, work_abs=work_abs,
+        work=work, work_abs=work_abs, crc32=crc,
     )
+
+
+def _check_crc(d: Path, crc: dict, recorded: dict) -> None:
+    """:class:`InvalidParameter` naming the first file whose CRC-32 differs from the recorded one."""
+    for name, value in recorded.items():
+        if name in crc and crc[name] != value:
+            raise InvalidParameter(
+                f"{d / name} does not hold what its checkpoint recorded (CRC-32 {crc[name]:08x}, "
+                f"recorded {value:08x}): the file was changed or damaged after it was written. Remove "
+                f"{d} to start the run afresh (resume=False, or `fem-elastic run` without --resume), "
+                "or restore the file."
+            )
 
 
 #: The per-step fields of a checkpoint that does not name them (written before ``min_det_F``).
@@ -392,9 +424,10 @@ def _read_records(path: Path, n: int, size: int) -> np.ndarray:
     return data.reshape(n, size)
 
 
-def _read_cuts(path: Path, n: int, n_bytes: int) -> list:
+def _read_cuts(path: Path, n: int, n_bytes: int) -> tuple[list, int]:
+    """The first ``n`` failed attempts in ``path`` (``n_bytes`` bytes) and the CRC-32 of those bytes."""
     if n == 0:
-        return []
+        return [], zlib.crc32(b"")
     try:
         with open(path, "rb") as fh:
             data = fh.read(n_bytes)
@@ -410,7 +443,7 @@ def _read_cuts(path: Path, n: int, n_bytes: int) -> list:
             f"{path} holds {len(cuts)} failed attempts, the checkpoint counts {n}: the directory is "
             "damaged; remove it to start afresh."
         )
-    return cuts
+    return cuts, zlib.crc32(data)
 
 
 class Checkpointer:
@@ -441,9 +474,11 @@ class Checkpointer:
             for name in (CHECKPOINT_NAME, FRAMES_NAME, STEPS_NAME, CUTS_NAME):
                 (self.directory / name).unlink(missing_ok=True)
             self.n_frames = self.last_step = self.n_cuts = self.cuts_bytes = 0
+            self.crc = dict.fromkeys((FRAMES_NAME, STEPS_NAME, CUTS_NAME), 0)  # CRC-32 of no bytes
         else:
             self.n_frames, self.last_step, self.n_cuts = len(resume.frames), resume.step, len(resume.cuts)
             self.cuts_bytes = resume.cuts_bytes
+            self.crc = dict(resume.crc32)
         for tmp in self.directory.glob(f".{CHECKPOINT_NAME}.*.tmp"):  # what a kill mid-write left
             tmp.unlink(missing_ok=True)
 
@@ -467,19 +502,23 @@ class Checkpointer:
         """
         d = self.directory
         k, nf, nc = snapshot.step, snapshot.n_frames, snapshot.n_cuts
-        self._append(d / FRAMES_NAME, self.n_frames, self.frame_size,
-                     frames[self.n_frames:nf])
+        new_frames = _record_bytes(frames[self.n_frames:nf])
+        self._append_bytes(d / FRAMES_NAME, self.n_frames * self.frame_size * 8, new_frames)
         rows = np.column_stack([np.asarray(stats[name][self.last_step:k], dtype=float)
                                 for name in STEP_FIELDS]) if k > self.last_step else []
-        self._append(d / STEPS_NAME, self.last_step, len(STEP_FIELDS), rows)
+        new_steps = _record_bytes(rows)
+        self._append_bytes(d / STEPS_NAME, self.last_step * len(STEP_FIELDS) * 8, new_steps)
         new_cuts = _cut_lines(cuts[self.n_cuts:nc])
         self._append_bytes(d / CUTS_NAME, self.cuts_bytes, new_cuts)
         cuts_bytes = self.cuts_bytes + len(new_cuts)
+        crc = {FRAMES_NAME: zlib.crc32(new_frames, self.crc[FRAMES_NAME]),  # running CRC of the prefix
+               STEPS_NAME: zlib.crc32(new_steps, self.crc[STEPS_NAME]),
+               CUTS_NAME: zlib.crc32(new_cuts, self.crc[CUTS_NAME])}
         meta = {
             "format": FORMAT, "step": k, "n_steps": self.fingerprint["n_steps"], "n_frames": nf,
             "n_cuts": nc, "cuts_bytes": cuts_bytes, "frame_size": self.frame_size,
             "driving": bool(snapshot.driving), "step_fields": list(STEP_FIELDS),
-            "fingerprint": self.fingerprint,
+            "fingerprint": self.fingerprint, "crc32": crc,
         }
         s = snapshot.state
         arrays = {
@@ -498,7 +537,7 @@ class Checkpointer:
 
         path = _atomic_write(d / CHECKPOINT_NAME, write)
         self.n_frames, self.n_cuts, self.last_step = nf, nc, k
-        self.cuts_bytes = cuts_bytes
+        self.cuts_bytes, self.crc = cuts_bytes, crc
         log.debug("checkpoint after %d steps (t = %.6g s) in %s", k, s.t, d)
         return path
 
@@ -515,11 +554,19 @@ class Checkpointer:
         The bytes a committed checkpoint counts are never rewritten, so a crash
         here leaves that checkpoint readable.
         """
-        with open(path, "ab") as fh:
-            fh.truncate(n_keep)
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
+        try:
+            with open(path, "ab") as fh:
+                fh.truncate(n_keep)
+                fh.write(data)
+                fh.flush()
+                os.fsync(fh.fileno())
+        except OSError as exc:  # a full disk: the committed records stay as they were
+            raise write_failed(path, exc) from exc
+
+
+def _record_bytes(records) -> bytes:
+    """Records of float64 as the little-endian bytes the appended files hold."""
+    return b"".join(np.asarray(r, dtype="<f8").tobytes() for r in records)
 
 
 def _cut_lines(cuts) -> bytes:

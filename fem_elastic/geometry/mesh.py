@@ -252,6 +252,28 @@ def _check_unused(n_vertices: int, tets: np.ndarray) -> None:
         )
 
 
+#: Vertices closer than this fraction of the mesh's diameter count as one point duplicated.
+COINCIDENT_TOL = 1e-9
+
+
+def _check_coincident(points: np.ndarray) -> None:
+    """Coincident vertices: tets on either side of them are not connected (a hidden crack)."""
+    from scipy.spatial import cKDTree
+
+    diameter = float(np.linalg.norm(np.ptp(points, axis=0)))
+    pairs = cKDTree(points).query_pairs(COINCIDENT_TOL * diameter, output_type="ndarray")
+    if pairs.size:
+        dup = np.unique(pairs)
+        raise InvalidMesh(
+            f"{len(pairs)} pair(s) of vertices coincide (closer than {COINCIDENT_TOL:g} of the mesh's "
+            f"size, {COINCIDENT_TOL * diameter:.3g} m): vertices {_listed(dup)}. The tets on either "
+            "side share no vertex there, so the body has a hidden crack. Merge them with a tolerance "
+            "(gmsh: Coherence Mesh; numpy: np.unique of the rounded coordinates, then remap the tets), "
+            "or, if the crack is meant, mesh the pieces as separate bodies.",
+            elements=dup,
+        )
+
+
 def _facet_indices(mesh: MeshTet, triples: np.ndarray) -> np.ndarray:
     """skfem facet index of each vertex triple, -1 where it is not a facet."""
     triples = np.sort(np.asarray(triples, dtype=np.int64).reshape(-1, 3), axis=1)
@@ -389,7 +411,8 @@ def validate_mesh(mesh, *, degenerate_tol: float = DEGENERATE_TOL):
     tets have the same four vertices; the mesh spans ``SIZE_RANGE`` (1e-30 to 1e30
     m) and lies near enough the origin that its coordinates resolve its edges to
     ``RESOLUTION`` (1e-6); no tet is degenerate (``|V| <= degenerate_tol * mean
-    |V|``); none is inverted (``V < 0``); every vertex is used by some tet.
+    |V|``); none is inverted (``V < 0``); every vertex is used by some tet; no two
+    vertices coincide (closer than ``COINCIDENT_TOL`` of the mesh's diameter).
 
     Parameters
     ----------
@@ -445,6 +468,7 @@ def validate_mesh(mesh, *, degenerate_tol: float = DEGENERATE_TOL):
     _check_scale(points, tets)
     _check_volumes(_signed_volumes(points, tets), degenerate_tol)
     _check_unused(points.shape[0], tets)
+    _check_coincident(points)
     return mesh
 
 

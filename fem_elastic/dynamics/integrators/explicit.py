@@ -118,6 +118,9 @@ RECHECK_EVERY = 50
 _CEIL_SLACK = 1e-9
 
 
+#: The largest ``max_substeps`` accepted: sub-steps of one step, a finite bound.
+MAX_SUBSTEPS = 1_000_000
+
 class _Explicit(Integrator):
     """Shared: the force, held DOFs, and adaptive sub-stepping from the critical time step.
 
@@ -157,6 +160,10 @@ class _Explicit(Integrator):
         for name, value in (("recheck_every", recheck_every), ("max_substeps", max_substeps)):
             if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
                 raise InvalidParameter(f"{name} must be an integer >= 1, got {value!r}.")
+        if max_substeps > MAX_SUBSTEPS:  # a finite bound: a step never runs for hours
+            raise InvalidParameter(
+                f"max_substeps must be at most {MAX_SUBSTEPS:,}, got {max_substeps!r}; a step that needs "
+                "more sub-steps wants a smaller dt or an implicit integrator.")
         self.substep = bool(substep)
         self.safety = float(safety)
         self.recheck_every = int(recheck_every)
