@@ -134,7 +134,10 @@ class _Package(types.ModuleType):
     """
 
     def __setattr__(self, name, value):
-        if isinstance(value, _MovedModule) and name in self.__dict__:
+        # an old module path must not shadow a public name, also one resolved lazily
+        # by the package's __getattr__ (``fe.render``, public since issue 20)
+        if isinstance(value, _MovedModule) and (name in self.__dict__
+                                                or name in self.__dict__.get("__all__", ())):
             return
         super().__setattr__(name, value)
 

@@ -3,9 +3,12 @@
 A run directory ``DIR`` holds
 
 - ``DIR/series.pvd``: the ParaView collection of every frame written, with its time (s);
-- ``DIR/frames/frame_%06d.vtu``: the mesh vertices at their DEFORMED positions and the
-  (vertex) tets, with point data ``displacement`` (m) and ``velocity`` (m/s) and cell
-  data ``von_mises`` (Pa) and ``energy_density`` (J/m^3), see :mod:`fem_elastic.physics.fields`;
+- ``DIR/frames/frame_%06d.vtu``: the mesh nodes at their REFERENCE positions and the
+  tets (linear, VTK type 10, or quadratic for P2 bodies, type 24, with their mid-edge
+  nodes), with point data ``displacement`` (m) and ``velocity`` (m/s), cell data
+  ``von_mises`` (Pa) and ``energy_density`` (J/m^3) (see :mod:`fem_elastic.physics.fields`),
+  and field data ``TimeValue`` (s) and ``units``: ParaView's Warp By Vector on
+  ``displacement`` draws the deformed body (felupe's, SfePy's and FEniCS's convention);
 - ``DIR/summary.json``: the run's figures, written when the run ends (completed,
   diverged, failed (a step raised an error, :class:`fe.StepFailed`) or interrupted);
   a run that diverged or failed says at which step (``failed_step``, ``failed_time``)
@@ -14,7 +17,8 @@ A run directory ``DIR`` holds
 Each file is written atomically (:mod:`fem_elastic.files`), and the PVD is rewritten after
 every frame, so the directory is a readable series at any moment: a crash or Ctrl-C loses
 at most the frame being written. :func:`fem_elastic.app.vtu.read_series` reads it back.
-P2 bodies are written at their vertices (the same values ``fe.simulate`` records).
+:func:`~fem_elastic.app.vtu.read_series` returns the vertex values (the ones ``fe.simulate``
+records) of P2 bodies too.
 """
 
 from __future__ import annotations
@@ -31,7 +35,7 @@ import numpy as np
 from ..dynamics.observers import Observer
 from ..errors import Diverged, InvalidParameter, StepFailed
 from ..physics.fields import CellFields
-from .vtu import write_pvd, write_vtu_frame
+from .vtu import REFERENCE_POINTS, write_pvd, write_vtu_frame
 from ..files import write_text_atomic
 
 __all__ = ["SeriesWriter", "write_summary", "to_json"]
@@ -45,6 +49,37 @@ SUMMARY_NAME = "summary.json"
 FRAME_PATTERN = "frame_{:06d}.vtu"
 
 STATUSES = ("completed", "interrupted", "diverged", "failed")
+
+#: The units of a frame's arrays, stored in each VTU (``fem_elastic.app.vtu.vtu_units``).
+FRAME_UNITS = {"points": REFERENCE_POINTS, "displacement": "m", "velocity": "m/s",
+               "von_mises": "Pa", "energy_density": "J/m^3", "TimeValue": "s"}
+
+
+def frame_grid(model) -> tuple[np.ndarray, np.ndarray]:
+    """The nodes and cells a frame of ``model`` is written on.
+
+    Returns
+    -------
+    nodes : numpy.ndarray
+        ``(N, 3)`` reference positions (m) of every DOF node: the vertices, then
+        (P2) the mid-edge nodes, in the model's DOF order.
+    cells : numpy.ndarray
+        ``(m, 4)`` vertex indices (P1, springs) or ``(m, 10)`` node indices of
+        quadratic tets, whose order (vertices, then edges 01, 12, 20, 03, 13, 23)
+        is both scikit-fem's P2 order and VTK's (cell type 24).
+    """
+    if getattr(model, "models", None) is not None and model.space.order != 1:
+        raise InvalidParameter(
+            "VTU output of a fe.MultiBody takes linear bodies only (its nodes are written body "
+            "after body, and a reader takes the vertices first); build every body with "
+            "fe.ElasticBody(material, order=1), or write each P2 body as its own fe.Model run."
+        )
+    nodes = np.asarray(model.X, dtype=np.float64).reshape(-1, 3)
+    if getattr(model.space, "order", 1) == 2:
+        cells = np.asarray(model.space.scalar_basis.element_dofs, dtype=np.int64).T
+    else:
+        cells = np.asarray(model.mesh.t, dtype=np.int64).T
+    return nodes, cells
 
 
 def to_json(value):
@@ -254,6 +289,9 @@ class SeriesWriter(Observer):
         self.fields = CellFields(model)
         self._X = model.to_vertices(model.X)  # (nv, 3) reference vertex positions (m)
         self._tets = np.asarray(model.mesh.t, dtype=np.int64).T  # (n_tets, 4) vertex tets
+        # the nodes written: every DOF node (P2: vertices first, then edge nodes) and the cells
+        # over them, (n_tets, 4) or (n_tets, 10) in VTK's quadratic-tet order
+        self._nodes, self._cells = frame_grid(model)
         self._last_fields: dict | None = None
         self._last_state = None  # the last state seen (written or not) and its step
         self._last_step = -1
@@ -332,13 +370,14 @@ class SeriesWriter(Observer):
             raise InvalidParameter("this SeriesWriter has finished; make a new one for a new run.")
         t0 = time.perf_counter()
         m = self.model
-        u = m.to_vertices(state.x - m.X)  # the Trajectory's vertex displacement (m)
-        v = m.to_vertices(state.v)
+        u = (state.x - m.X).reshape(-1, 3)  # every node's displacement (m)
+        v = np.reshape(state.v, (-1, 3))
         fields = self.fields(state.x)
         name = f"{FRAMES_DIR}/{FRAME_PATTERN.format(self._next_index)}"
-        path = write_vtu_frame(self.run_dir / name, self._X + u, self._tets,
+        path = write_vtu_frame(self.run_dir / name, self._nodes, self._cells,
                                {"displacement": u, "velocity": v}, fields,
-                               compression=self.compression)
+                               compression=self.compression,
+                               field_data={"TimeValue": [float(state.t)]}, units=FRAME_UNITS)
         entries = self.frames + [(float(state.t), name)]
         write_pvd(self.run_dir / PVD_NAME, entries)
         self.frames = entries  # only now: a failed write leaves the series as it was

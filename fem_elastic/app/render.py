@@ -3,8 +3,10 @@
 A run directory (written by :class:`fem_elastic.app.output.SeriesWriter`) holds a
 VTU series of the deformed mesh. This module draws it without a display:
 the deformed surface coloured by von Mises stress (Pa) or displacement
-magnitude (m), a scalar bar with its unit, the ground plane when the run had
-one, and a time label, as PNG frames, a GIF or an MP4 (H.264). Several runs
+magnitude (m) over the grey outline of the undeformed body, the displacement
+magnified when it is too small to see (``warp``, stated on the picture), a
+colour bar with its unit in a band below the scene, the ground plane (whole)
+when the run had one, the scene's name and a time label, as PNG frames, a GIF or an MP4 (H.264). Several runs
 of the same scene (FEM beside its mass-spring copy, say) are drawn side by
 side, one viewport each, with one colour range and one camera for all.
 
@@ -55,7 +57,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InvalidParameter, MissingDependency
-from ..files import _atomic_write
+from ..files import _atomic_write, write_failed
 from .render_scene import FIELDS, _Run, _run_from_series, _Scene, color_range
 
 __all__ = ["render_runs", "render_frame", "color_range", "MissingDependency", "FORMATS", "FIELDS"]
@@ -218,7 +220,7 @@ def _progress(total: int, enabled: bool, desc: str):
 
 def render_runs(run_dirs, out, *, format: str = "mp4", size=(960, 540),
                 color_by: str = "von_mises", fps: float = 30, titles=None, every: int = 1,
-                progress: bool = False) -> list[Path]:
+                progress: bool = False, warp="auto") -> list[Path]:
     """Draw one run, or several side by side, as an MP4, a GIF or PNG frames.
 
     Parameters
@@ -251,6 +253,11 @@ def render_runs(run_dirs, out, *, format: str = "mp4", size=(960, 540),
         Draw every ``every``-th recorded frame, and the last.
     progress : bool
         Show a tqdm progress bar.
+    warp : "auto" or float
+        Magnification of the displacement drawn (:func:`~fem_elastic.app.render_scene.warp_factor`):
+        ``"auto"`` magnifies a deflection under 5 % of the body's size (runs
+        without a ground), and the picture states the factor; the undeformed
+        outline is drawn in grey either way.
 
     Returns
     -------
@@ -288,7 +295,7 @@ def render_runs(run_dirs, out, *, format: str = "mp4", size=(960, 540),
         _require("imageio_ffmpeg")
     runs = _load_runs(run_dirs, titles, color_by, every)
     t0 = time.perf_counter()
-    scene = _Scene(pv, runs, color_by, (w, h))
+    scene = _Scene(pv, runs, color_by, (w, h), warp=warp)
     bar = _progress(scene.n_frames, progress, f"rendering {out.name}")
     try:
         if format == "png":
@@ -352,20 +359,25 @@ def _render_mp4(scene: _Scene, out: Path, fps: float, bar) -> Path:
             str(tmp), (w, h), fps=fps, codec="libx264", pix_fmt_out="yuv420p", quality=6,
             macro_block_size=1, ffmpeg_log_level="error", output_params=["-f", "mp4"],
         )
-        writer.send(None)  # start ffmpeg
         try:
-            for k in range(scene.n_frames):
-                writer.send(np.ascontiguousarray(scene.draw(k)))
-                if bar is not None:
-                    bar.update()
-        finally:
-            writer.close()
+            writer.send(None)  # start ffmpeg
+            try:
+                for k in range(scene.n_frames):
+                    writer.send(np.ascontiguousarray(scene.draw(k)))
+                    if bar is not None:
+                        bar.update()
+            finally:
+                writer.close()  # waits for ffmpeg: its trailer errors surface here
+        except (OSError, RuntimeError) as exc:  # ffmpeg failed (a full disk, a codec error)
+            raise write_failed(out, exc) from exc
+        if os.path.getsize(tmp) == 0:  # ffmpeg exited without writing a movie
+            raise write_failed(out, OSError(0, "ffmpeg wrote an empty file"))
 
     return _atomic_write(out, write)
 
 
 def render_frame(run_dirs, path, *, frame=-1, size=(960, 540), color_by: str = "von_mises",
-                 titles=None) -> Path:
+                 titles=None, warp="auto") -> Path:
     """Draw frames of one run, or of several side by side, as one PNG.
 
     The colour range and the camera are those of the whole run (as in
@@ -386,6 +398,8 @@ def render_frame(run_dirs, path, *, frame=-1, size=(960, 540), color_by: str = "
         As in :func:`render_runs`.
     titles : sequence of str, optional
         One title per run.
+    warp : "auto" or float
+        As in :func:`render_runs`.
 
     Returns
     -------
@@ -416,7 +430,7 @@ def render_frame(run_dirs, path, *, frame=-1, size=(960, 540), color_by: str = "
                 "the last)."
             )
     frames = [int(k) % n for k in frames]
-    scene = _Scene(pv, runs, color_by, (w, h), rows=len(frames), multi_samples=8)
+    scene = _Scene(pv, runs, color_by, (w, h), rows=len(frames), multi_samples=8, warp=warp)
     try:
         image = scene.draw(frames)
     finally:

@@ -30,7 +30,7 @@ import os
 import sys
 from collections.abc import Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -40,11 +40,16 @@ from ..errors import InvalidParameter
 FIELDS = {
     "von_mises": ("von Mises stress", "Pa", "cell"),
     "displacement": ("displacement", "m", "point"),
+    "body": ("body", "index", "cell"),  # a fe.MultiBody's series: each body in its own colour
 }
 
 # From the focal point towards the camera: in front (-y), a little above (+z) and to the
 # side of the clamped end (-x), low enough that a deflection in z shows.
 VIEW_DIRECTION = (-0.3, -1.0, 0.3)
+
+# The bottom fraction of each viewport kept for the colour bar and the clock: the camera
+# frames the scene in the rest.
+BAR_BAND = 0.16
 
 # The top of the colour range is this percentile of the values shown (see the docstring of
 # fem_elastic.app.render).
@@ -107,6 +112,7 @@ class _Run:
     shown: np.ndarray  # indices into values[t] of the entities seen (range statistics)
     ground_z: float | None  # m, height of the ground plane or None
     status: str  # "completed", "interrupted", "diverged" or "" when unknown
+    scene: str = ""  # the scene's name (summary "scene"), the picture's title
 
     def points(self, k: int) -> np.ndarray:
         """Deformed positions (m), ``(n, 3)``, of frame ``k``."""
@@ -158,7 +164,7 @@ def _run_from_series(series, title: str, color_by: str) -> _Run:
     return _Run(
         title=title, times=times, points_ref=points_ref, displacement=displacement, faces=faces,
         values=values, association=association, shown=shown, ground_z=ground_z,
-        status=str(summary.get("status", "")),
+        status=str(summary.get("status", "")), scene=str(summary.get("scene") or ""),
     )
 
 
@@ -200,6 +206,38 @@ def color_range(values, percentile: float = COLOR_PERCENTILE) -> tuple[float, fl
     if not top > 0:
         top = 1.0
     return 0.0, top
+
+
+def warp_factor(runs: Sequence[_Run], warp="auto") -> float:
+    """The factor the displacements of a render are drawn magnified by.
+
+    ``warp="auto"``: :func:`fem_elastic.physics.pyvista_grid.auto_magnification`
+    of the largest displacement over every frame and run against the body's
+    size (the largest extent of the reference bounds): a deflection under 5 %
+    of it is magnified to about 15 %, by 1, 2 or 5 times a power of ten. Runs
+    with a ground are drawn as they are (magnifying a body near contact would
+    push it through the ground). A number: that factor (> 0).
+    """
+    from ..physics.pyvista_grid import auto_magnification
+
+    if warp == "auto":
+        if any(run.ground_z is not None for run in runs):
+            return 1.0
+        u = max((float(np.nanmax(np.linalg.norm(run.displacement, axis=2), initial=0.0))
+                 for run in runs), default=0.0)
+        size = max(float(np.max(np.ptp(run.points_ref, axis=0))) for run in runs)
+        return auto_magnification(u, size)
+    if isinstance(warp, bool) or not isinstance(warp, (int, float, np.number)) or not warp > 0 \
+            or not np.isfinite(warp):
+        raise InvalidParameter(
+            f"warp={warp!r}: give 'auto' or a magnification > 0 of the displacement (1: as it is)."
+        )
+    return float(warp)
+
+
+def _ground_pad(bounds: np.ndarray) -> float:
+    """The margin (m) of the ground plane around the bodies: a tenth of their largest extent."""
+    return 0.1 * float(max(np.max(bounds[1] - bounds[0]), 1e-12))
 
 
 def _union_bounds(runs: Sequence[_Run]) -> np.ndarray:
@@ -249,7 +287,7 @@ def _quiet_window_probe():
         vtkLogger.SetStderrVerbosity(before)
 
 
-def _camera(bounds: np.ndarray, aspect: float, view_angle: float = 30.0):
+def _camera(bounds: np.ndarray, aspect: float, view_angle: float = 30.0, fill: float = 1.0):
     """Fixed camera that fits ``bounds`` in a viewport: position, focal point, view up (m).
 
     The view comes from the front (-y), above (+z) and the clamped end's side
@@ -258,7 +296,8 @@ def _camera(bounds: np.ndarray, aspect: float, view_angle: float = 30.0):
     distance at which all eight corners of the box lie inside the perspective
     frustum (vertical ``view_angle`` in degrees, VTK's default 30, and the
     horizontal one that the viewport's ``aspect`` = width / height gives),
-    with a 10 % margin.
+    with a 10 % margin; ``fill`` < 1 keeps the box within that fraction of the
+    height (the rest is the colour bar's band).
     """
     center = bounds.mean(axis=0)
     forward = -np.asarray(VIEW_DIRECTION, dtype=float)  # from the camera to the focal point
@@ -272,8 +311,8 @@ def _camera(bounds: np.ndarray, aspect: float, view_angle: float = 30.0):
     )
     rel = corners - center
     a, b, c = rel @ right, rel @ up, rel @ -forward  # c: towards the camera
-    tan_v = np.tan(np.radians(view_angle) / 2.0)
-    tan_h = tan_v * aspect
+    tan_h = np.tan(np.radians(view_angle) / 2.0) * aspect
+    tan_v = np.tan(np.radians(view_angle) / 2.0) * fill  # the scene fills this part of the height
     distance = float(np.max(c + np.maximum(np.abs(a) / tan_h, np.abs(b) / tan_v)))
     size = float(np.linalg.norm(bounds[1] - bounds[0]))
     distance = 1.1 * distance if distance > 0 else max(size, 1.0)
@@ -290,14 +329,28 @@ class _Scene:
     """
 
     def __init__(self, pv, runs: Sequence[_Run], color_by: str, size, *, rows: int = 1,
-                 multi_samples: int = 0):
+                 multi_samples: int = 0, warp="auto"):
         self.runs = list(runs)
         self.color_by = color_by
         label, unit, _ = FIELDS[color_by]
         self.clim = color_range(run.values[:, run.shown] for run in self.runs)
+        # bodies by index: one colour of a qualitative map each (tab10: ten distinct colours,
+        # the range centred on the integers so that body i takes the i-th colour)
+        self.cmap = "tab10" if color_by == "body" else "viridis"
+        if color_by == "body":
+            self.clim = (-0.5, 9.5)
+        self.warp = warp_factor(self.runs, warp)
+        if self.warp != 1.0:  # the colours stay those of the true displacement
+            self.runs = [replace(run, displacement=self.warp * run.displacement)
+                         for run in self.runs]
         bounds = _union_bounds(self.runs)
+        # the ground plane reaches a pad beyond the bodies: the camera frames it whole
+        framed = bounds.copy()
+        if any(run.ground_z is not None for run in self.runs):
+            framed[0, :2] -= _ground_pad(bounds)
+            framed[1, :2] += _ground_pad(bounds)
         cols = len(self.runs)
-        camera = _camera(bounds, aspect=(size[0] / cols) / (size[1] / rows))
+        camera = _camera(framed, aspect=(size[0] / cols) / (size[1] / rows), fill=1.0 - BAR_BAND)
         with _quiet_window_probe():
             self.plotter = pv.Plotter(
                 off_screen=True, shape=(rows, cols), window_size=list(size), border=False,
@@ -309,7 +362,8 @@ class _Scene:
         p.ren_win.SetMultiSamples(multi_samples)
         # text height in pixels: a 20th of a viewport's height, kept between 8 and 24 px
         row_height = size[1] / rows
-        font = int(np.clip(row_height / 20.0, 8, 24))
+        # ... and a 28th of its width, so that titles of side-by-side panels stay apart
+        font = int(np.clip(min(row_height / 20.0, size[0] / cols / 28.0), 8, 24))
         self._views = []  # (row, run, surface PolyData, time label) per viewport
         for r in range(rows):
             for c, run in enumerate(self.runs):
@@ -322,23 +376,40 @@ class _Scene:
                 data = poly.cell_data if run.association == "cell" else poly.point_data
                 data[color_by] = run.values[0].copy()
                 body = p.add_mesh(
-                    poly, scalars=color_by, clim=self.clim, cmap="viridis", show_edges=True,
+                    poly, scalars=color_by, clim=self.clim, cmap=self.cmap, show_edges=True,
                     edge_color="black", edge_opacity=0.15, show_scalar_bar=False,
                     nan_color="red", lighting=True,
                 )
                 if run.ground_z is not None:
                     self._add_ground(pv, p, bounds, run.ground_z)
-                title = run.title
-                self._text(p, title, (0.5, 0.97), font, "center", "top")
+                # the undeformed body: its feature edges, grey
+                outline = pv.PolyData(
+                    run.points_ref, np.hstack([np.full((len(run.faces), 1), 3), run.faces]).ravel()
+                ).extract_feature_edges(feature_angle=30.0, boundary_edges=True,
+                                        non_manifold_edges=False, manifold_edges=False)
+                if outline.n_points:
+                    p.add_mesh(outline, color=(0.45, 0.45, 0.45), line_width=1, lighting=False)
+                # the scene's name and the magnification once, top left of the first panel;
+                # each panel's variant centred on the line below
+                head = [run.scene] if run.scene and run.scene != run.title else []
+                if self.warp != 1.0:
+                    head.append(f"displacement x {self.warp:g}")
+                if r == 0 and c == 0 and head:
+                    self._text(p, "\n".join(head), (0.02, 0.98), font, "left", "top")
+                self._text(p, run.title, (0.5, 0.98 - (len(head) + 0.2) * 1.25 * font / row_height),
+                           font, "center", "top")
                 stamp = self._text(p, " ", (0.02, 0.03), font, "left", "bottom")
-                if r == rows - 1 and c == cols - 1:
+                if r == rows - 1 and c == cols - 1 and color_by != "body":
+                    # in the band under the scene (the camera leaves it free), right of the clock
                     p.add_scalar_bar(
                         title=f"{label} ({unit})", mapper=body.mapper, color="black", fmt="%.3g",
-                        n_labels=2, vertical=False, position_x=0.42, position_y=0.02, width=0.44,
-                        height=min(0.4, 3.5 * font / row_height),
-                        title_font_size=font, label_font_size=int(0.85 * font),
+                        n_labels=3, vertical=False, position_x=0.42, position_y=0.01, width=0.46,
+                        height=BAR_BAND - 0.02, title_font_size=font,
+                        label_font_size=int(0.85 * font),
                     )
                 p.camera_position = camera
+                # shift the picture up by half the band: the scene fills the rest of the viewport
+                p.camera.SetWindowCenter(0.0, -BAR_BAND)
                 p.camera.clipping_range = self._clipping(camera, bounds)
                 self._views.append((r, run, poly, stamp))
 

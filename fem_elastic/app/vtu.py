@@ -20,17 +20,28 @@ import numpy as np
 from ..errors import InvalidParameter
 from ..files import _atomic_write, write_text_atomic
 
-__all__ = ["write_vtu_frame", "write_pvd", "read_series", "SeriesData"]
+__all__ = ["write_vtu_frame", "write_pvd", "read_series", "SeriesData", "vtu_units",
+           "REFERENCE_POINTS"]
 
 logger = logging.getLogger(__name__)
 
+#: The ``units`` entry of ``"points"`` in frames whose points are the REFERENCE positions (the
+#: convention of felupe, SfePy and FEniCS: ParaView's Warp By Vector on ``displacement`` gives
+#: the deformed body once). Frames without it (written before) hold the deformed positions.
+REFERENCE_POINTS = "m, reference position"
+
 
 def write_vtu_frame(path, points, tets, point_data=None, cell_data=None, *,
-                    compression: str | None = "zlib") -> Path:
-    """Write one frame of a series: a tet grid with point and cell data, as XML VTU.
+                    compression: str | None = "zlib", field_data=None, units=None) -> Path:
+    """Write one frame of a series: a tet grid with point, cell and field data, as XML VTU.
 
     Written with meshio's VTU writer (VTK XML ``UnstructuredGrid``, binary,
     zlib-compressed by default), which ParaView, VisIt and pyvista open, and atomically.
+    Linear tets are VTK cells of type 10, quadratic ones (``(m, 10)`` cells:
+    the vertices, then the mid-edge nodes of edges 01, 12, 20, 03, 13, 23,
+    scikit-fem's P2 order) of type 24. meshio's writer drops field data, so
+    ``field_data`` and ``units`` are added to the file's ``<FieldData>``
+    (ASCII arrays) here.
 
     Parameters
     ----------
@@ -39,7 +50,8 @@ def write_vtu_frame(path, points, tets, point_data=None, cell_data=None, *,
     points : array_like
         ``(n, 3)`` point coordinates (m), usually the deformed positions.
     tets : array_like
-        ``(m, 4)`` vertex indices of the linear tets.
+        ``(m, 4)`` vertex indices of linear tets, or ``(m, 10)`` node indices of
+        quadratic ones (VTK order, see above).
     point_data : dict of str to array_like, optional
         Arrays of shape ``(n,)`` or ``(n, k)``, e.g. ``"displacement"`` (m).
     cell_data : dict of str to array_like, optional
@@ -49,6 +61,13 @@ def write_vtu_frame(path, points, tets, point_data=None, cell_data=None, *,
         Compression of the binary arrays. On a 10k-tet frame zlib halves the
         file (~0.5 MB instead of ~1.1 MB) and takes ~30 ms against ~4 ms
         without: pass None where write time matters more than disk.
+    field_data : dict of str to array_like, optional
+        Whole-grid values, e.g. ``{"TimeValue": [t]}`` (s: the name VTK and
+        ParaView read as the time of a lone file).
+    units : dict of str to str, optional
+        The unit of each array, e.g. ``{"displacement": "m"}``; stored as the
+        field array ``"units"``: the UTF-8 bytes (UInt8) of ``name=unit`` lines,
+        read back by :func:`vtu_units` (meshio cannot read VTK string arrays).
 
     Returns
     -------
@@ -78,10 +97,10 @@ def write_vtu_frame(path, points, tets, point_data=None, cell_data=None, *,
 
     points = np.ascontiguousarray(points, dtype=np.float64)
     tets = np.ascontiguousarray(tets, dtype=np.int64)
-    if points.ndim != 2 or points.shape[1] != 3 or tets.ndim != 2 or tets.shape[1] != 4:
+    if points.ndim != 2 or points.shape[1] != 3 or tets.ndim != 2 or tets.shape[1] not in (4, 10):
         raise InvalidParameter(
-            f"write_vtu_frame needs points (n, 3) and tets (m, 4), got {points.shape} and "
-            f"{tets.shape}."
+            f"write_vtu_frame needs points (n, 3) and tets (m, 4) or (m, 10), got {points.shape} "
+            f"and {tets.shape}."
         )
     pdata = {}
     for name, value in (point_data or {}).items():
@@ -105,11 +124,67 @@ def write_vtu_frame(path, points, tets, point_data=None, cell_data=None, *,
         raise InvalidParameter(
             f"compression must be 'zlib', 'lzma' or None, got {compression!r}."
         )
-    mio = meshio.Mesh(points, [("tetra", tets)], point_data=pdata, cell_data=cdata)
-    return _atomic_write(
-        Path(path),
-        lambda tmp: meshio.write(tmp, mio, file_format="vtu", compression=compression),
-    )
+    fdata = {name: np.atleast_1d(np.asarray(value)) for name, value in (field_data or {}).items()}
+    if units:
+        text = "\n".join(f"{name}={unit}" for name, unit in units.items())
+        fdata["units"] = np.frombuffer(text.encode("utf-8"), dtype=np.uint8)
+    cell_type = "tetra" if tets.shape[1] == 4 else "tetra10"
+    mio = meshio.Mesh(points, [(cell_type, tets)], point_data=pdata, cell_data=cdata)
+
+    def write(tmp):
+        meshio.write(tmp, mio, file_format="vtu", compression=compression)
+        if fdata:
+            _insert_field_data(Path(tmp), fdata)
+
+    return _atomic_write(Path(path), write)
+
+
+def _insert_field_data(path: Path, fdata: dict) -> None:
+    """Add ``<FieldData>`` (ASCII arrays) to a VTU file meshio wrote, which has none."""
+    arrays = []
+    for name, value in fdata.items():
+        value = np.asarray(value).ravel()
+        if value.dtype == np.uint8:
+            vtk_type, text = "UInt8", " ".join(str(int(b)) for b in value)
+        elif np.issubdtype(value.dtype, np.integer):
+            vtk_type, text = "Int64", " ".join(str(int(b)) for b in value)
+        else:
+            vtk_type, text = "Float64", " ".join(repr(float(b)) for b in value)
+        arrays.append(f'<DataArray type="{vtk_type}" Name={quoteattr(name)} '
+                      f'NumberOfTuples="{value.size}" format="ascii">{text}</DataArray>')
+    block = ("<FieldData>" + "".join(arrays) + "</FieldData>").encode("utf-8")
+    data = path.read_bytes()
+    tag = b"<UnstructuredGrid>"
+    at = data.find(tag)
+    if at < 0:  # meshio's layout changed: fail loudly rather than write a file without its time
+        raise InvalidParameter(f"{path}: no <UnstructuredGrid> element to add field data to.")
+    path.write_bytes(data[:at + len(tag)] + block + data[at + len(tag):])
+
+
+def vtu_units(field_data: dict) -> dict:
+    """The ``{array name: unit}`` of a frame's field data (``units`` of :func:`write_vtu_frame`).
+
+    Parameters
+    ----------
+    field_data : dict of str to array_like
+        A frame's field data as meshio or pyvista read it.
+
+    Returns
+    -------
+    dict of str to str
+        Empty when the frame has no ``"units"`` array (frames written before it existed).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> vtu_units({"units": np.frombuffer(b"displacement=m", dtype=np.uint8)})
+    {'displacement': 'm'}
+    """
+    raw = field_data.get("units")
+    if raw is None:
+        return {}
+    text = bytes(np.asarray(raw, dtype=np.uint8).ravel()).decode("utf-8", errors="replace")
+    return dict(line.split("=", 1) for line in text.splitlines() if "=" in line)
 
 
 def write_pvd(path, entries) -> Path:
@@ -163,11 +238,13 @@ class SeriesData:
         ``(T,)`` frame times (s), in the PVD's order.
     points_ref : numpy.ndarray
         ``(n, 3)`` reference vertex positions (m): the first frame's points
-        minus its displacement.
+        (minus its displacement in frames written before the points were the
+        reference ones, see :data:`REFERENCE_POINTS`).
     tets : numpy.ndarray
-        ``(m, 4)`` vertex indices of the tets.
+        ``(m, 4)`` vertex indices of the tets (the vertices of quadratic ones).
     displacement, velocity : numpy.ndarray
-        ``(T, n, 3)`` vertex displacement (m) and velocity (m/s).
+        ``(T, n, 3)`` vertex displacement (m) and velocity (m/s) (the mid-edge
+        nodes of quadratic tets are left out).
     cell_data : dict of str to numpy.ndarray
         ``(T, m)`` per-tet fields present in every frame read, e.g.
         ``"von_mises"`` (Pa) and ``"energy_density"`` (J/m^3).
@@ -226,7 +303,7 @@ def _read_frame(path: Path):
         logger.warning("%s: frame could not be read (%s: %s); skipped", path,
                        type(err).__name__, err)
         return None
-    blocks = [i for i, b in enumerate(mio.cells) if b.type == "tetra"]
+    blocks = [i for i, b in enumerate(mio.cells) if b.type in ("tetra", "tetra10")]
     n = mio.points.shape[0]
     problems = []
     if not blocks:
@@ -238,15 +315,20 @@ def _read_frame(path: Path):
     if problems:
         logger.warning("%s: incomplete frame (%s); skipped", path, ", ".join(problems))
         return None
-    tets = np.vstack([mio.cells[i].data for i in blocks]).astype(np.int64)
+    # quadratic tets: their first four nodes are the vertices, numbered before the edge nodes
+    tets = np.vstack([mio.cells[i].data[:, :4] for i in blocks]).astype(np.int64)
+    nv = int(tets.max()) + 1
     cells = {
         name: np.concatenate([np.asarray(value[i], dtype=np.float64).ravel() for i in blocks])
         for name, value in mio.cell_data.items()
         if all(np.asarray(value[i]).ndim == 1 for i in blocks)
     }
-    pdata = {k: np.asarray(mio.point_data[k], dtype=np.float64)
+    pdata = {k: np.asarray(mio.point_data[k], dtype=np.float64)[:nv]
              for k in ("displacement", "velocity")}
-    return np.asarray(mio.points, dtype=np.float64), tets, pdata, cells
+    points = np.asarray(mio.points, dtype=np.float64)[:nv]
+    if vtu_units(mio.field_data).get("points") != REFERENCE_POINTS:
+        points = points - pdata["displacement"]  # an older frame: its points are deformed
+    return points, tets, pdata, cells
 
 
 def read_series(run_dir) -> SeriesData:
@@ -304,7 +386,7 @@ def read_series(run_dir) -> SeriesData:
         points, frame_tets, pdata, cdata = frame
         if tets is None:
             tets = frame_tets
-            points_ref = points - pdata["displacement"]
+            points_ref = points
         elif not np.array_equal(frame_tets, tets) or points.shape != points_ref.shape:
             logger.warning("%s: frame has a different grid from the first frame; skipped", path)
             continue

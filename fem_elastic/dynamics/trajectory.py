@@ -8,8 +8,12 @@ det F of the body after it (``min_det_F``: <= 0 means an inverted element).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+
+from ..errors import InvalidParameter
+from ..physics import result_view as _view
 
 __all__ = ["Trajectory", "STEP_FIELDS", "COUNT_FIELDS"]
 
@@ -21,7 +25,8 @@ COUNT_FIELDS = STEP_FIELDS[:6]
 
 
 #: Per-step fields that are not work done (a sum of them means nothing).
-_NOT_SUMMED = ("min_det_F",)
+_NOT_SUMMED = ("min_det_F", "contact_min_distance", "contact_active", "contact_force",
+               "contact_intersecting")
 
 _CUTS_LISTED = 50  # a summary lists the first failed attempts, and counts the rest
 
@@ -66,6 +71,14 @@ class Trajectory:
         How the run ended.
     resumed_from_step : int or None
         The step a resumed run continued from (its checkpoint), else None.
+    model : Model or None
+        The model simulated (set by :func:`fe.simulate`), for :meth:`to_pyvista`,
+        :meth:`plot` and :meth:`save`.
+
+    Notes
+    -----
+    ``repr(traj)`` is a few lines (size, method, timings, energies, the largest
+    displacement); in Jupyter the same rows show as a table (``_repr_html_``).
     """
 
     times: np.ndarray
@@ -81,10 +94,11 @@ class Trajectory:
     steps: int = 0
     dt: float = 0.0
     integrator: str = ""
-    final_state: object = None
+    final_state: Any = None
     message: str = ""
     cuts: list = field(default_factory=list)
     resumed_from_step: int | None = None
+    model: Any = field(default=None, repr=False, compare=False)
 
     @property
     def dt_cuts(self) -> int:
@@ -119,4 +133,178 @@ class Trajectory:
         # the smallest det F over the run's steps, and how many steps ended with an inverted element
         out["min_det_F"] = float(det.min()) if det.size else None
         out["steps_inverted"] = int(np.count_nonzero(det <= 0.0))
+        from .contact_watch import summarize as contact_summary
+
+        out.update(contact_summary(st))  # min distance, contacts, force, intersecting at the end
         return out
+
+    # looking at it ----------------------------------------------------------------------------
+    def _rows(self) -> list[tuple[str, str]]:
+        u = np.linalg.norm(self.displacement, axis=-1) if self.displacement.size else np.zeros(1)
+        finite = u[np.isfinite(u)]
+        det = np.asarray(self.step_stats.get("min_det_F", np.zeros(0)), dtype=float)
+        det = det[np.isfinite(det)]
+        rows = [
+            ("integrator", f"{self.integrator or '?'}, dt = {_view.fmt(self.dt, 's')}"),
+            ("steps", f"{self.steps} ({self.times.size} frames to t = "
+                      f"{_view.fmt(float(self.times[-1]) if self.times.size else 0.0, 's')})"),
+            ("wall time", _view.fmt(self.wall_time, "s")),
+        ]
+        if self.model is not None:
+            nv, nt = self.model.mesh.p.shape[1], self.model.mesh.t.shape[1]
+            rows.insert(0, ("mesh", f"{nv} vertices, {nt} tets"))
+        if self.total.size:
+            rows.append(("energy", f"{_view.fmt(float(self.total[0]), 'J')} -> "
+                                   f"{_view.fmt(float(self.total[-1]), 'J')}"))
+        rows.append(("max |u|", _view.fmt(float(finite.max()) if finite.size else None, "m")))
+        if det.size:
+            rows.append(("min det F", _view.fmt(float(det.min()))))
+        if self.dt_cuts:
+            rows.append(("steps cut", str(self.dt_cuts)))
+        if self.message:
+            rows.append(("ended", self.message))
+        return rows
+
+    def __repr__(self) -> str:
+        return _view.text_table("Trajectory", self._rows())
+
+    def _repr_html_(self) -> str:
+        return _view.html_table("Trajectory", self._rows())
+
+    def _need_model(self, model):
+        model = self.model if model is None else model
+        if model is None:
+            raise InvalidParameter(
+                "this Trajectory does not know its model (it was not made by fe.simulate); "
+                "pass it, e.g. traj.to_pyvista(-1, model=model)."
+            )
+        return model
+
+    def _frame_index(self, frame: int) -> int:
+        n = int(self.times.size)
+        if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or not -n <= frame < n:
+            raise InvalidParameter(
+                f"frame={frame!r} is out of range: the trajectory has {n} frames (0..{n - 1}, "
+                "or -1 for the last)."
+            )
+        return int(frame) % n
+
+    def to_pyvista(self, frame: int = -1, *, model=None):
+        """Frame ``frame`` as a pyvista ``UnstructuredGrid`` on the reference points.
+
+        Point data ``displacement`` (m) and ``velocity`` (m/s), cell data
+        ``von_mises`` (Pa) and ``energy_density`` (J/m^3); P2 bodies as quadratic
+        tets (VTK type 24). ``grid.warp_by_vector("displacement")`` is the
+        deformed body. The last frame of a run is its final state exactly; the
+        frames record vertex values only, so for a P2 body the mid-edge nodes of
+        the other frames are put at their edge's mean (a curved edge drawn straight).
+
+        Parameters
+        ----------
+        frame : int
+            Recorded frame index (negative from the end).
+        model : Model, optional
+            Default the model simulated.
+
+        Returns
+        -------
+        pyvista.UnstructuredGrid
+        """
+        from ..physics.pyvista_grid import body_grid, nodal_positions
+
+        model = self._need_model(model)
+        k = self._frame_index(frame)
+        final = self.final_state
+        if final is not None and k == self.times.size - 1 and float(final.t) == float(self.times[k]):
+            x, v = final.x, final.v
+        else:
+            x = np.asarray(model.X) + nodal_positions(model, self.displacement[k])
+            v = nodal_positions(model, self.velocity[k])
+        return body_grid(model, x, v, time=float(self.times[k]))
+
+    def plot(self, frame: int = -1, *, scalars: str = "von_mises", magnification="auto",
+             model=None, **kwargs):
+        """Draw frame ``frame`` with pyvista: the deformed body over its undeformed outline.
+
+        ``magnification="auto"`` magnifies a deflection under 5 % of the body's
+        size (stated on the picture). Off screen: ``off_screen=True``, or
+        ``screenshot="frame.png"``. Other keywords go to
+        :func:`fem_elastic.physics.pyvista_grid.plot_grid`.
+
+        Returns
+        -------
+        pyvista.Plotter
+        """
+        from ..physics.pyvista_grid import plot_grid
+
+        grid = self.to_pyvista(frame, model=model)
+        kwargs.setdefault("title", f"{self.integrator}: t = {float(self.times[frame]):.4g} s")
+        return plot_grid(grid, scalars=scalars, magnification=magnification, **kwargs)
+
+    def plot_energy(self, ax=None):
+        """Kinetic, potential and total energy (J) against time (s), with matplotlib.
+
+        Returns
+        -------
+        matplotlib.axes.Axes
+        """
+        return _view.line_axes(
+            self.times, {"kinetic": self.kinetic, "potential": self.potential, "total": self.total},
+            xlabel="time (s)", ylabel="energy (J)", title=f"{self.integrator}, dt = {self.dt:g} s",
+            ax=ax,
+        )
+
+    #: quantities of :meth:`plot_history` recorded per frame, with their units
+    FRAME_QUANTITIES = {"kinetic": "J", "potential": "J", "total": "J", "max_displacement": "m",
+                        "max_speed": "m/s"}
+
+    def plot_history(self, quantity: str, ax=None):
+        """One quantity against time (per frame) or step (per-step statistics), with matplotlib.
+
+        Parameters
+        ----------
+        quantity : str
+            Per frame: ``"kinetic"``, ``"potential"``, ``"total"`` (J),
+            ``"max_displacement"`` (m), ``"max_speed"`` (m/s); per step: any
+            key of :attr:`step_stats` (e.g. ``"newton_iterations"``,
+            ``"min_det_F"``, ``"seconds_step"``).
+        ax : matplotlib.axes.Axes, optional
+
+        Returns
+        -------
+        matplotlib.axes.Axes
+        """
+        if quantity in self.FRAME_QUANTITIES:
+            if quantity == "max_displacement":
+                y = np.linalg.norm(self.displacement, axis=-1).max(axis=-1)
+            elif quantity == "max_speed":
+                y = np.linalg.norm(self.velocity, axis=-1).max(axis=-1)
+            else:
+                y = getattr(self, quantity)
+            unit = self.FRAME_QUANTITIES[quantity]
+            return _view.line_axes(self.times, {quantity: y}, xlabel="time (s)",
+                                   ylabel=f"{quantity.replace('_', ' ')} ({unit})", ax=ax)
+        if quantity in self.step_stats:
+            y = np.asarray(self.step_stats[quantity], dtype=float)
+            unit = " (s)" if quantity.startswith("seconds") else ""
+            return _view.line_axes(np.arange(y.size), {quantity: y}, xlabel="step",
+                                   ylabel=quantity.replace("_", " ") + unit, ax=ax)
+        raise InvalidParameter(
+            f"unknown quantity {quantity!r}; plot one of {sorted(self.FRAME_QUANTITIES)} "
+            f"or a per-step statistic {sorted(self.step_stats)}."
+        )
+
+    def save(self, run_dir, *, model=None):
+        """Write the trajectory as a run directory, the format ``fem-elastic run`` writes.
+
+        ``series.pvd``, ``frames/frame_%06d.vtu`` (reference points,
+        ``displacement``, ``velocity``, stresses; P2 edge nodes as in
+        :meth:`to_pyvista`) and ``summary.json``; read it back with
+        :func:`fe.read_series`, render it with ``fe.render``.
+
+        Returns
+        -------
+        pathlib.Path
+            ``run_dir``.
+        """
+        return _view.save_result("trajectory", self, run_dir, self._need_model(model))
