@@ -24,6 +24,10 @@ The package is grouped by layer; each imports only those below it
 ``import fem_elastic`` needs only numpy, scipy and scikit-fem: meshio is
 imported inside the I/O functions, pyamg inside the AMG solver, and the
 studies on first use of ``fe.study``.
+
+The user guide, the API reference and the example gallery (``examples/``)
+are the Sphinx site in ``docs/``; the README's "Documentation" section
+gives the command that builds it.
 """
 
 from . import _compat
@@ -74,8 +78,11 @@ from .errors import (
     InvalidParameter,
     MissingDependency,
     NotConverged,
+    OutputInUse,
+    ResourceLimit,
     StepFailed,
     UnderConstrained,
+    WriteFailed,
 )
 from .geometry import (
     beam_mesh,
@@ -102,7 +109,15 @@ from .materials import (
     material_from_energy,
 )
 from .materials import energy_math as math  # noqa: F401  (fe.math; not in __all__: never shadows the stdlib)
+from .physics.body import Body
+from .physics.multibody import MultiBody
+from .physics.broad_phase import BoundingSpheres
+from .physics.impulse_contact import BoundImpulseContact, ImpulseContact, collide_particles
 from .physics import (
+    BoundIPCContact,
+    CollisionSurface,
+    IPCContact,
+    collision_surface,
     Box,
     CellFields,
     ElasticBody,
@@ -153,6 +168,7 @@ __all__ = [
     "Checkpoint",
     "load_checkpoint",
     "study", "elastica_tip",
+    "render", "render_runs", "render_frame",
     "CellFields", "cell_fields", "von_mises", "SeriesData", "read_series", "write_pvd", "write_vtu_frame",
     "SeriesWriter", "write_summary",
     "BuiltRun", "Scene", "SceneError", "load_scene", "parse_scene", "scene_help",
@@ -172,9 +188,13 @@ __all__ = [
     "mesh_quality", "remove_unused_vertices", "reorient", "save_mesh", "signed_volumes",
     "solve_static", "validate_mesh",
     "InversionWarning", "StepFailed",
+    "OutputInUse", "ResourceLimit", "WriteFailed",
     "EquilibriumPoint", "LoadPath", "RoundoffWarning", "UnstableEquilibrium", "load_path",
     "ProjectiveCorotated", "ProjectiveDynamics", "ShapeMatcher", "ShapeMatching",
     "PBD", "XPBD", "ConstraintNeoHookean",
+    "CollisionSurface", "collision_surface", "IPCContact", "BoundIPCContact",
+    "Body", "MultiBody",
+    "ImpulseContact", "BoundImpulseContact", "collide_particles", "BoundingSpheres",
 ]
 
 _compat.install()
@@ -186,6 +206,14 @@ def __getattr__(name: str):
         import importlib
 
         return importlib.import_module(".study", __name__)
+    if name == "render":  # public since issue 20: the rendering module, imported on first use
+        import importlib
+
+        return importlib.import_module(".app.render", __name__)
+    if name in ("render_runs", "render_frame"):  # fe.render_runs(...), fe.render_frame(...)
+        import importlib
+
+        return getattr(importlib.import_module(".app.render", __name__), name)
     if name in _compat.MOVED:  # fe.mesh, fe.analytic, ...: the modules' old places
         return _compat.moved_module(name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

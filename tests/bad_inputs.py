@@ -277,6 +277,120 @@ def _without_sympy(tmp):
 # -- the list ----------------------------------------------------------------------------------
 IP, IM, SE = fe.InvalidParameter, fe.InvalidMesh, fe.SceneError
 
+# -- output directories, resources, contradictions, checkpoints (issue 18) -------------------------
+def _check_holder(err):
+    import os
+
+    assert err.pid == os.getpid()
+
+
+def _check_limit(available):
+    def check(err):
+        assert err.available == available and err.needed > available
+    return check
+
+
+def _second_run(tmp):
+    """A run into a directory whose lock is held (here by this process, through another descriptor)."""
+    from fem_elastic.app.run_lock import RunLock
+    from fem_elastic.app.runner import run_scene
+
+    out = Path(tmp) / "out"
+    out.mkdir()
+    with RunLock(out):
+        return run_scene(fe.parse_scene(SCENE, source="scene.toml"), out, render=False)
+
+
+def _fake_run(tmp):
+    """A run directory as a render sees it: series.pvd and frames/."""
+    run = Path(tmp) / "out" / "fem"
+    (run / "frames").mkdir(parents=True, exist_ok=True)
+    (run / "series.pvd").write_text("<VTKFile/>")
+    return run
+
+
+def _fifo(tmp):
+    import os
+
+    path = Path(tmp) / "scene.toml"
+    os.mkfifo(path)
+    return path
+
+
+def _sparse(tmp, size):
+    path = Path(tmp) / "huge.toml"
+    with open(path, "wb") as fh:
+        fh.truncate(size)  # sparse: no disk used
+    return path
+
+
+def _with_env(name, value, call):
+    import os
+
+    old = os.environ.get(name)
+    os.environ[name] = value
+    try:
+        return call()
+    finally:
+        if old is None:
+            del os.environ[name]
+        else:
+            os.environ[name] = old
+
+
+def _too_big(tmp):
+    return _with_env("FEM_ELASTIC_MEMORY_LIMIT", "1M", lambda: fe.Model(
+        fe.beam_mesh(cells=(10, 3, 3)), density=1000.0, body=_body(), fixed="left"))
+
+
+def _disk_full(tmp):
+    from fem_elastic.app.runner import run_scene
+
+    scene = fe.parse_scene(SCENE, source="scene.toml")
+    return _with_env("FEM_ELASTIC_DISK_LIMIT", "1K", lambda: run_scene(scene, Path(tmp) / "out", render=False))
+
+
+def _cracked_mesh():
+    """The 2-cell beam cut at x = 0.5: the right cell's tets get their own copies of the plane's 4 vertices."""
+    mesh = _mesh()
+    p, t = mesh.p.T.copy(), mesh.t.T.copy()
+    on = np.flatnonzero(np.isclose(p[:, 0], 0.5))
+    right = p[t].mean(axis=1)[:, 0] > 0.5
+    tr = t[right]
+    for i, v in enumerate(on):
+        tr[tr == v] = len(p) + i
+    t[right] = tr
+    return fe.mesh_from_arrays(np.vstack([p, p[on]]), t)
+
+
+def _loose_piece(tmp):
+    """Two 2-cell beams 0.5 m apart, only the lower one fixed: the upper one floats."""
+    p, t = _mesh().p.T, _mesh().t.T
+    mesh = fe.mesh_from_arrays(np.vstack([p, p + (0.0, 0.0, 0.5)]), np.vstack([t, t + len(p)]))
+    fixed = np.flatnonzero(np.isclose(mesh.p[0], 0.0) & (mesh.p[2] < 0.3))
+    return fe.solve_static(fe.Model(mesh, density=1000.0, body=_body(), fixed=fixed, gravity=(0.0, 0.0, -9.81)))
+
+
+def _resume_altered(tmp):
+    ck = _stopped_run(tmp)
+    data = bytearray((ck / "frames.f64").read_bytes())
+    data[8] ^= 0x01  # one bit of the first frame's kinetic energy
+    (ck / "frames.f64").write_bytes(bytes(data))
+    return fe.simulate(_model(gravity=(0.0, 0.0, -9.81)), fe.ImplicitEuler(), 0.01, steps=4,
+                       checkpoint_dir=ck, resume=True)
+
+
+def _resume_edited_scene(tmp):
+    from fem_elastic.app import cli
+
+    args = _cli_scene(tmp, "", "")
+    out = Path(args[3])
+    assert cli.main(args) == 0
+    copy = out / "scene.toml"
+    copy.write_text(copy.read_text().replace("E = 1e6", "E = 2e6"))
+    return ["run", "--resume", str(out), "--quiet"]
+
+
 BAD_INPUTS: list[BadInput] = [
     # materials and the model
     BadInput("Poisson ratio nu = 0.5", lambda tmp: fe.NeoHookean(E=1e6, nu=0.5), IP,
@@ -379,6 +493,14 @@ BAD_INPUTS: list[BadInput] = [
              "are not strictly outside Ground(", "so the body starts with a gap, e.g. dhat / 2"),
     BadInput("negative Rayleigh damping", lambda tmp: fe.Rayleigh(alpha=-1.0), IP,
              "Rayleigh damping alpha must be a finite number >= 0 (1/s), got -1.0", "a finite number >= 0"),
+    BadInput("impulse contact with restitution above 1", lambda tmp: fe.ImpulseContact(restitution=1.5), IP,
+             "restitution must be a number in [0, 1], got 1.5", "(0: no bounce, 1: elastic bounce)"),
+    BadInput("impulse contact with a thickness of 0", lambda tmp: fe.ImpulseContact(thickness=0.0), IP,
+             "thickness must be a finite distance > 0 (m), got 0.0", "e.g. thickness=1e-3"),
+    BadInput("impulse contact with implicit Euler",
+             lambda tmp: fe.ImplicitEuler().step(m := _model(contact=fe.ImpulseContact()), fe.State.rest(m), 1e-3),
+             IP, "fe.ImplicitEuler cannot apply fe.ImpulseContact",
+             "Use contact=fe.IPCContact(dhat=...) with this solver"),
     # meshes
     BadInput("an inverted element in the mesh", lambda tmp: _model(_inverted_mesh()), IM,
              "1 tets are inverted (negative signed volume): elements [0]", "fem_elastic.reorient(mesh)"),
@@ -508,7 +630,67 @@ BAD_INPUTS: list[BadInput] = [
     BadInput("a CLI scene with an absurd time step (dt = 1e200 s)",
              lambda tmp: _cli_scene(tmp, "dt = 0.01", "dt = 1e200"), 2,
              "dt = 1e+200 s is too large", "e.g. dt=1e-3"),
+    # output directories, writes and resources (issue 18: items 1, 2, 3)
+    BadInput("a second run on an output directory another run is writing", _second_run, fe.OutputInUse,
+             "is in use by process", "give another --out directory", note="at once, carrying .pid",
+             check=_check_holder),
+    BadInput("fem-elastic run --out \"\"", lambda tmp: _cli_scene(tmp, "", "")[:3] + ["", "--quiet"], 2,
+             "the output directory is empty", "e.g. --out results/run1"),
+    BadInput("an --out directory that holds the user's own files",
+             lambda tmp: _cli_scene(tmp, "", "")[:2] + ["--out", str(tmp), "--quiet"], 2,
+             "holds files that a run did not write (scene.toml)", "or --overwrite to write there all the same"),
+    BadInput("fem-elastic render -o with another format's extension",
+             lambda tmp: ["render", str(_fake_run(tmp)), "--format", "mp4", "-o", str(Path(tmp) / "movie.gif")], 2,
+             "does not end in .mp4, the format asked for", "name the file movie.mp4"),
+    BadInput("fem-elastic render -o into the run's own frames",
+             lambda tmp: ["render", str(_fake_run(tmp)), "--format", "png", "-o", str(_fake_run(tmp) / "frames")],
+             2, "is a file of the runs being rendered", "Give a path outside the run directories"),
+    BadInput("a scene path that is a FIFO (named pipe)", lambda tmp: ["run", str(_fifo(tmp)), "--out",
+                                                                      str(Path(tmp) / "out")], 2,
+             "is a FIFO (named pipe), not a file", "give the path of a file"),
+    BadInput("a scene file of 64 MiB", lambda tmp: ["run", str(_sparse(tmp, 64 * 2**20)), "--out",
+                                                     str(Path(tmp) / "out")], 2,
+             "is 64 MiB, more than the 4 MiB", "check that this is the right file"),
+    BadInput("a model larger than the free memory", _too_big, fe.ResourceLimit,
+             "would need about", "Use a coarser mesh, order=1, an explicit integrator",
+             note="before any assembly, carrying .needed and .available (bytes)", check=_check_limit(2**20)),
+    BadInput("a series larger than the free disk", _disk_full, fe.ResourceLimit,
+             "would need about", "Record fewer frames ([output] every = N)",
+             note="before the first frame is written, carrying .needed and .available (bytes)",
+             check=_check_limit(1024)),
+    BadInput("a render size above 8192 px", lambda tmp: _scene("[time]", "[output]\nsize = [10000, 540]\n[time]"),
+             SE, "size[0] = 10000 is out of range: it must be <= 8192", "<= 8192"),
+    BadInput("max_dt_cuts = 100", lambda tmp: fe.ImplicitEuler(max_dt_cuts=100), IP,
+             "max_dt_cuts must be an integer from 0 to 20", "lower dt instead"),
+    BadInput("max_substeps = 10^9", lambda tmp: fe.SymplecticEuler(max_substeps=10**9), IP,
+             "max_substeps must be at most 1,000,000", "a smaller dt or an implicit integrator"),
+    # models that contradict themselves (item 7) and the real cause (item 10)
+    BadInput("a boundary both fixed and driven",
+             lambda tmp: _model(fixed=["left", "right"], driven={"right": fe.Twist(1.0, duration=1.0)}), IP,
+             "driven boundary 'right' is also fixed", "Remove 'right' from fixed (or displacement), or from driven"),
+    BadInput("two drives that share vertices",
+             lambda tmp: _model(driven={"right": fe.Twist(1.0, duration=1.0),
+                                        "top": fe.Translate((0.0, 0.0, 0.01), duration=1.0)}), IP,
+             "driven boundaries 'right' and 'top' share", "Drive the union with one motion"),
+    BadInput("coincident duplicate vertices (a hidden crack)", lambda tmp: _cracked_mesh(), IM,
+             "pair(s) of vertices coincide", "Merge them with a tolerance"),
+    BadInput("a piece of the mesh no support reaches, solved statically", _loose_piece, fe.UnderConstrained,
+             "2 separate pieces, 1 of which no support reaches (no fixed or driven DOF): 12 vertices",
+             "Fix a boundary on each piece"),
+    # several bodies (issue 17, item 1)
+    BadInput("fe.MultiBody([]) (no body)", lambda tmp: fe.MultiBody([]), IP,
+             "MultiBody needs at least one body", "use fe.Model for a single body"),
+    BadInput("two fe.Body with the same name in one MultiBody",
+             lambda tmp: fe.MultiBody([fe.Body(fe.beam_mesh(cells=(1, 1, 1)), 1000.0,
+                                               fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3)), name="a")] * 2),
+             IP, "body names must be unique, but ['a'] appear more than once", "give each body its own name"),
+    # checkpoints (item 8)
+    BadInput("a checkpoint's frames.f64 changed after it was written", _resume_altered, IP,
+             "frames.f64 does not hold what its checkpoint recorded (CRC-32", "to start the run afresh"),
+    BadInput("a run's scene.toml edited before --resume", _resume_edited_scene, 2,
+             "scene.toml was edited after the run started", "Undo the edit to resume"),
 ]
+
 
 
 # -- the table -------------------------------------------------------------------------------------

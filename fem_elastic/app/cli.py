@@ -20,6 +20,12 @@ converge; any other ``fe.FemElasticError``) and for an unexpected error (a bug: 
 which prints the traceback), 130 for Ctrl-C, at any moment. A closed or
 broken stdout (``fem-elastic info MESH | head -c 0``) ends the command quietly,
 and text that the terminal's encoding cannot show is escaped, never an error.
+
+An output directory is written by one run at a time (a second run on it exits
+2 at once, naming the first one's pid), never holds a run mixed with files it
+did not write (refused unless ``--overwrite``), and a write that fails (a full
+disk) exits 1 naming the file, with nothing truncated left under its name
+(:mod:`fem_elastic.app.run_lock`, :mod:`fem_elastic.files`).
 """
 
 from __future__ import annotations
@@ -64,6 +70,16 @@ def _int_at_least(minimum: int):
 
 
 _positive_int = _int_at_least(1)
+
+
+def _render_side(text: str) -> int:
+    """An argparse type: a render width or height, bounded as the scene schema bounds it."""
+    from .scene_schema import MAX_RENDER_SIDE
+
+    v = _positive_int(text)
+    if v > MAX_RENDER_SIDE:
+        raise argparse.ArgumentTypeError(f"must be <= {MAX_RENDER_SIDE} px, got {text}")
+    return v
 _non_negative_int = _int_at_least(0)
 
 
@@ -81,7 +97,8 @@ def _tip_vertices(mesh):
 
 def _print_outcomes(out, outcomes, rendered, out_dir) -> None:
     out("")
-    out(f"{'variant':<12}{'status':<12}{'steps':>7}{'cut':>6}{'frames':>8}{'simulate (s)':>14}{'output (s)':>12}")
+    w = max([12] + [len(o.name) + 2 for o in outcomes])  # long variant names keep their column
+    out(f"{'variant':<{w}}{'status':<12}{'steps':>7}{'cut':>6}{'frames':>8}{'simulate (s)':>14}{'output (s)':>12}")
     for o in outcomes:
         traj = o.trajectory
         steps = traj.steps if traj is not None else 0
@@ -90,11 +107,13 @@ def _print_outcomes(out, outcomes, rendered, out_dir) -> None:
         if getattr(o, "figures", None):  # a static run: its load steps, a frame per point of the path
             steps = o.figures["load_steps"]
             frames = len(o.result.path) if o.result is not None else 0
-        out(f"{o.name:<12}{o.status:<12}{steps:>7d}{cut:>6d}{frames:>8d}{o.seconds_simulate:>14.2f}"
+        out(f"{o.name:<{w}}{o.status:<12}{steps:>7d}{cut:>6d}{frames:>8d}{o.seconds_simulate:>14.2f}"
             f"{o.seconds_output:>12.2f}")
     for o in outcomes:
         if getattr(o, "figures", None):
             _print_static(out, o)
+        elif getattr(o, "physics", None):
+            _print_dynamic(out, o)
     for o in outcomes:
         traj = o.trajectory
         if o.status == "completed" and traj is not None and traj.resumed_from_step is not None:
@@ -117,6 +136,24 @@ def _print_outcomes(out, outcomes, rendered, out_dir) -> None:
             sys.stderr.write(f"fem-elastic: {o.name}: {o.message}\n")
 
 
+def _print_dynamic(out, o) -> None:
+    """A time-stepping run's physical result: largest displacement, energy, det F, probes, reactions."""
+    f, traj = o.physics, o.trajectory
+    line = (f"{o.name}: max |u| = {f['max_displacement']:.4g} m at t = {f['max_displacement_time']:.4g} s "
+            f"(final {f['final_max_displacement']:.4g} m)")
+    if traj is not None and traj.total.size:
+        line += f"; energy {traj.total[0]:.4g} -> {traj.total[-1]:.4g} J"
+    det = traj.summary().get("min_det_F") if traj is not None else None
+    if det is not None:
+        line += f"; min det F {det:.4g}"
+    out(line)
+    for name, p in (f.get("probes") or {}).items():
+        u = p["final"]
+        out(f"{o.name}:   {name} (vertex {p['vertex']}): u = [{u[0]:.4g}, {u[1]:.4g}, {u[2]:.4g}] m at the end")
+    for name, r in (f.get("reactions") or {}).items():
+        out(f"{o.name}:   reaction on {name} at the end: [{r[0]:.4g}, {r[1]:.4g}, {r[2]:.4g}] N")
+
+
 def _print_static(out, o) -> None:
     """A static run's physical result: largest displacement and the reaction on each support."""
     f = o.figures
@@ -124,6 +161,9 @@ def _print_static(out, o) -> None:
     out(f"{o.name}: static, load factor {f['load_factor']:.4g} in {f['load_steps']} load step(s); "
         f"max |u| = {f['max_displacement']:.6g} m at vertex {f['max_displacement_vertex']} "
         f"(u = [{u[0]:.4g}, {u[1]:.4g}, {u[2]:.4g}] m)")
+    for name, p in (f.get("probes") or {}).items():
+        u = p["final"]
+        out(f"{o.name}:   {name} (vertex {p['vertex']}): u = [{u[0]:.4g}, {u[1]:.4g}, {u[2]:.4g}] m")
     for name, r in f["reactions"].items():
         out(f"{o.name}:   reaction on {name}: [{r[0]:.6g}, {r[1]:.6g}, {r[2]:.6g}] N")
     if f["min_eigenvalue"] is not None:
@@ -151,12 +191,12 @@ def _run_scene_command(scene, out_dir, out, **options) -> int:
     """Run (or resume) a scene through :func:`run_scene`, report it, and return the exit status."""
     from .runner import SceneInterrupted, run_scene
 
-    out_dir = Path(out_dir)
     t0 = time.perf_counter()
     try:
-        outcomes, rendered = run_scene(scene, out_dir, **options)
+        outcomes, rendered = run_scene(scene, out_dir, **options)  # refuses --out "" by its text
+        out_dir = Path(out_dir)
     except SceneInterrupted as stop:
-        return _interrupted(stop, out_dir, scene, time.perf_counter() - t0)
+        return _interrupted(stop, Path(out_dir), scene, time.perf_counter() - t0)
     return _finish_scene_command(scene, out_dir, outcomes, rendered, t0, out)
 
 
@@ -218,6 +258,7 @@ def _run(args) -> int:
     return _run_scene_command(
         scene, args.out, out, variants=args.variant or None, progress=not args.quiet,
         render=not args.no_render, checkpoint_every=args.checkpoint_every,
+        overwrite=args.overwrite,
     )
 
 
@@ -256,7 +297,8 @@ def _demo(args) -> int:
     t0 = time.perf_counter()
     out_dir = Path(args.out)
     try:
-        outcomes, rendered = run_scene(scene, out_dir, progress=not args.quiet, render=not args.no_render)
+        outcomes, rendered = run_scene(scene, args.out, progress=not args.quiet, render=not args.no_render,
+                                       overwrite=args.overwrite)
     except SceneInterrupted as stop:
         return _interrupted(stop, out_dir, scene, time.perf_counter() - t0)
     seconds = time.perf_counter() - t0
@@ -318,17 +360,33 @@ def _render(args) -> int:
             f"{src} holds no VTU series (no series.pvd in it or in its subdirectories): give the "
             "output directory of `fem-elastic run` or `fem-elastic demo`."
         )
-    target = Path(args.output) if args.output else (
+    target = Path(args.output) if args.output is not None else (
         src / ("png" if args.format == "png" else f"movie.{args.format}"))
+    from .run_lock import check_render_target
+
+    check_render_target(target, args.format, run_dirs)  # never over an input; extension = format
     t0 = time.perf_counter()
     written = render_runs(
         run_dirs, target, format=args.format, size=tuple(args.size), color_by=args.color_by,
-        fps=args.fps, every=args.every, progress=not args.quiet,
+        fps=args.fps, every=args.every, progress=not args.quiet, warp=args.warp,
     )
     out(f"rendered {', '.join(p.name for p in run_dirs)} in {time.perf_counter() - t0:.1f} s:")
     for line in _collapse_pngs(written, src):
         out(f"  {line}")
     return 0
+
+
+def _warp(text: str):
+    """``--warp``: ``auto`` or a magnification > 0."""
+    if text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is neither 'auto' nor a number") from None
+    if not (value > 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"{text!r} must be a magnification > 0")
+    return value
 
 
 def _variant_order(out_dir: Path) -> list:
@@ -339,6 +397,16 @@ def _variant_order(out_dir: Path) -> list:
 
 
 def _info(args) -> int:
+    """Each MESH in turn (``fem-elastic info meshes/*``); the worst exit status of them."""
+    status = 0
+    for i, mesh in enumerate(args.mesh):
+        if i:
+            _Out(False)("")
+        status = max(status, _info_one(Path(mesh)))
+    return status
+
+
+def _info_one(path: Path) -> int:
     import numpy as np
 
     from ..errors import FemElasticError
@@ -346,7 +414,6 @@ def _info(args) -> int:
     from ..geometry.mesh import mesh_quality, validate_mesh
 
     out = _Out(False)
-    path = Path(args.mesh)
     if path.suffix == ".toml":
         from .scene import load_scene
 
@@ -468,6 +535,11 @@ def _add_run_options(p, out_default=None) -> None:
         p.add_argument("--out", default=out_default, metavar="DIR", help="output directory (created)")
     p.add_argument("--no-render", action="store_true",
                    help="write the VTU series and summary only, no movie or PNG frames")
+    p.add_argument("--overwrite", action="store_true", help=_OVERWRITE_HELP)
+
+
+_OVERWRITE_HELP = ("write into --out even when it holds files a run did not write (they are left "
+                   "alone); without it such a directory is refused")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -477,6 +549,9 @@ def _parser() -> argparse.ArgumentParser:
         epilog="Run `fem-elastic COMMAND --help` for each command's options.",
     )
     _add_common(p, top=True)
+    # the package is imported already (this module is part of it): its __version__, no upward import
+    version = getattr(sys.modules.get(__name__.split(".")[0]), "__version__", "unknown")
+    p.add_argument("--version", action="version", version=f"fem-elastic {version}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
     demo = sub.add_parser(
@@ -504,6 +579,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--out", metavar="DIR", help="output directory (created)")
     run.add_argument("--no-render", action="store_true",
                      help="write the VTU series and summary only, no movie or PNG frames")
+    run.add_argument("--overwrite", action="store_true", help=_OVERWRITE_HELP)
     run.add_argument("--variant", action="append", metavar="NAME",
                      help="run only this variant (repeatable; default all)")
     run.add_argument("--checkpoint-every", type=_non_negative_int, metavar="N",
@@ -527,11 +603,14 @@ def _parser() -> argparse.ArgumentParser:
     render.add_argument("--format", choices=("mp4", "gif", "png"), default="mp4")
     render.add_argument("--output", "-o", metavar="PATH",
                         help="file (mp4/gif) or directory (png) to write; default DIR/movie.FORMAT or DIR/png")
-    render.add_argument("--size", type=_positive_int, nargs=2, default=(960, 540), metavar=("W", "H"),
-                        help="image size in pixels")
-    render.add_argument("--color-by", choices=("von_mises", "displacement"), default="von_mises")
+    render.add_argument("--size", type=_render_side, nargs=2, default=(960, 540), metavar=("W", "H"),
+                        help="image size in pixels (at most 8192 each)")
+    render.add_argument("--color-by", choices=("von_mises", "displacement", "body"), default="von_mises")
     render.add_argument("--fps", type=_positive_int, default=30, help="frames per second (mp4, gif)")
     render.add_argument("--every", type=_positive_int, default=1, help="render every N-th frame")
+    render.add_argument("--warp", type=_warp, default="auto", metavar="auto|FACTOR",
+                        help="magnify the displacement drawn: auto (when the deflection is under "
+                             "5%% of the body's size, no ground), or a factor such as 1 or 100")
     _add_common(render)
     render.set_defaults(func=_render)
 
@@ -541,7 +620,7 @@ def _parser() -> argparse.ArgumentParser:
         description="Print a tet mesh's counts, element quality, boundaries and validation verdict. "
                     "MESH is any tet mesh meshio reads (.vtu, .msh, ...) or a scene file (.toml).",
     )
-    info.add_argument("mesh", metavar="MESH", help="mesh file, or a scene file")
+    info.add_argument("mesh", metavar="MESH", nargs="+", help="mesh files, or scene files")
     _add_common(info)
     info.set_defaults(func=_info)
 

@@ -22,6 +22,7 @@ never stopped.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import shlex
@@ -34,7 +35,7 @@ from ..errors import Diverged, InvalidParameter, StepFailed
 log = logging.getLogger(__name__)
 
 __all__ = ["RunOutcome", "SceneInterrupted", "run_scene", "run_variant", "render_outputs",
-           "read_resumable", "resume_scene", "CHECKPOINT_DIR"]
+           "read_resumable", "resume_scene", "CHECKPOINT_DIR", "output_bytes"]
 
 #: The checkpoint directory inside a run directory.
 CHECKPOINT_DIR = "checkpoint"
@@ -69,6 +70,10 @@ class RunOutcome:
         A static run's result (``[solve] kind = "static"``, :mod:`fem_elastic.app.static_run`).
     figures : dict or None
         A static run's physical result: largest displacement (m), reaction on each support (N).
+    physics : dict or None
+        A completed time-stepping run's physical result
+        (:func:`fem_elastic.app.result_files.dynamic_figures`): largest displacement (m),
+        final reactions (N), probe points.
     """
 
     name: str
@@ -81,6 +86,7 @@ class RunOutcome:
     run: object = None
     result: object = None
     figures: dict | None = None
+    physics: dict | None = None
 
 
 class SceneInterrupted(KeyboardInterrupt):
@@ -150,6 +156,10 @@ def run_variant(run, out_dir, *, progress: bool = False, checkpoint_every: int |
                         record_every=run.record_every, checkpoint_dir=ck_dir, checkpoint_every=every,
                         resume=start)  # checks the checkpoint is this run's, returns its trajectory
         return RunOutcome(run.name, run_dir, "completed", traj.message, traj, 0.0, 0.0, run)
+    from ..resources import check_disk
+
+    check_disk(out_dir, output_bytes(run.model, run.steps, run.record_every),
+               f"the series of {run.name!r} ({run.steps // run.record_every + 1} frames)")
     # n_steps: the writer writes the last frame, before simulate's final checkpoint
     writer = SeriesWriter(run.model, run_dir, every=run.record_every, n_steps=run.steps, info=run.info,
                           resume_from=start)
@@ -180,8 +190,29 @@ def run_variant(run, out_dir, *, progress: bool = False, checkpoint_every: int |
             RunOutcome(run.name, run_dir, "interrupted", msg, None, elapsed, writer.seconds_output, run)
         ) from None
     elapsed = time.perf_counter() - t0
-    writer.finish(traj, status="completed", message=traj.message)
-    return RunOutcome(run.name, run_dir, "completed", traj.message, traj, elapsed, writer.seconds_output, run)
+    from .result_files import dynamic_figures
+
+    physics = dynamic_figures(run.model, traj, (run.info or {}).get("probe"))
+    writer.finish(traj, status="completed", message=traj.message, extra=physics)
+    return RunOutcome(run.name, run_dir, "completed", traj.message, traj, elapsed,
+                      writer.seconds_output, run, physics=physics)
+
+
+def output_bytes(model, steps: int, record_every: int) -> float:
+    """Disk a run's series and checkpoint take at most (bytes), from the model's counts.
+
+    A VTU frame holds, uncompressed, 72 bytes per node (points, displacement
+    and velocity: three float64 each) and per tet its
+    connectivity (8 bytes per node of the cell), offset, type and three float64
+    cell fields; zlib makes it smaller (a 1920-tet P1 frame: 88 kB written
+    against 163 kB by this bound), so this is an upper bound. A checkpoint
+    record adds ``8 (9 + 6 n_vertices)`` bytes per frame.
+    """
+    n_nodes = model.X.size // 3
+    n_tets = model.mesh.t.shape[1]
+    nloc = 4 if n_nodes == model.mesh.p.shape[1] else 10
+    frame = 72.0 * n_nodes + (8.0 * nloc + 33.0) * n_tets + 8.0 * (9 + 6 * model.mesh.p.shape[1])
+    return frame * (steps // max(int(record_every), 1) + 2)
 
 
 def _finished(summary_path: Path) -> bool:
@@ -232,7 +263,7 @@ def render_outputs(out_dir, run_dirs, output: dict, *, progress: bool = False) -
 
 
 def run_scene(scene, out_dir, *, variants=None, progress: bool = False, render: bool = True,
-              checkpoint_every: int | None = None, resume: bool = False):
+              checkpoint_every: int | None = None, resume: bool = False, overwrite: bool = False):
     """Run every variant of a scene into ``out_dir`` and render them.
 
     Parameters
@@ -251,17 +282,35 @@ def run_scene(scene, out_dir, *, variants=None, progress: bool = False, render: 
         Steps between checkpoints; default the scene's ``[output] checkpoint_every``.
     resume : bool
         Continue each variant from its checkpoint (see :func:`resume_scene`).
+    overwrite : bool
+        Write into ``out_dir`` even when it holds files a run did not write
+        (they are left alone; see :mod:`fem_elastic.app.run_lock`).
 
     Returns
     -------
     (list of RunOutcome, list of Path)
         The outcomes in the scene's order, and the rendered files.
+
+    Raises
+    ------
+    OutputInUse
+        Another run holds ``out_dir``'s lock.
+    InvalidParameter
+        ``out_dir`` is empty, a file, or holds files a run did not write (without ``overwrite``).
     """
-    out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InvalidParameter(f"--out {out_dir} is a file; give a directory for the run's output.")
+    from .run_lock import RunLock, check_output_dir, remove_stale_variants
+
+    out_dir = check_output_dir(out_dir, overwrite=overwrite or resume)
     runs = scene.build(variants)  # before touching the directory: a bad scene leaves it as it was
     out_dir.mkdir(parents=True, exist_ok=True)
+    with RunLock(out_dir):  # one run at a time in a directory; dropped on any exit, Ctrl-C too
+        if not resume:  # the folders of variants this scene does not have are another run's
+            remove_stale_variants(out_dir, list(scene.variants) + [r.name for r in runs])
+        return _run_locked(scene, out_dir, runs, variants, progress, render, checkpoint_every, resume)
+
+
+def _run_locked(scene, out_dir, runs, variants, progress, render, checkpoint_every, resume):
+    """:func:`run_scene` once the output directory is checked and locked."""
     (out_dir / "summary.json").unlink(missing_ok=True)  # an earlier run's: stale from now on
     if not resume:
         _record_run(out_dir, scene, variants, render, checkpoint_every)
@@ -305,6 +354,7 @@ def _record_run(out_dir: Path, scene, variants, render, checkpoint_every) -> Non
         "variants": None if variants is None else list(variants),
         "render": bool(render),
         "checkpoint_every": checkpoint_every,
+        "scene_sha256": hashlib.sha256(scene.text.encode("utf-8")).hexdigest(),  # edits are refused
     }
     write_text_atomic(out_dir / SCENE_COPY, scene.text)
     write_text_atomic(out_dir / RUN_RECORD, json.dumps(record, indent=2) + "\n")
@@ -344,7 +394,23 @@ def read_resumable(out_dir):
         source, base_dir = str(record["source"]), str(record["base_dir"])
     except (ValueError, KeyError, TypeError) as exc:
         raise InvalidParameter(f"{record_path} cannot be read ({exc}); start the run afresh.") from None
-    scene = parse_scene(copy.read_text(encoding="utf-8"), source=source, base_dir=base_dir)
+    raw = copy.read_bytes()
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InvalidParameter(
+            f"{copy} is not UTF-8 (byte {exc.start}: {raw[exc.start:exc.start + 1]!r}); it was re-saved in "
+            "another encoding since the run. Save it as UTF-8 again (the run wrote it so), or start the "
+            "run afresh in a new directory."
+        ) from None
+    digest = record.get("scene_sha256")
+    if digest is not None and hashlib.sha256(raw).hexdigest() != digest:
+        raise InvalidParameter(
+            f"{copy} was edited after the run started (its SHA-256 differs from the one in {record_path}); "
+            "a resumed run must continue the same scene. Undo the edit to resume, or run the edited "
+            "scene afresh: `fem-elastic run SCENE.toml --out NEW_DIR`."
+        )
+    scene = parse_scene(text, source=source, base_dir=base_dir)
     return scene, record
 
 

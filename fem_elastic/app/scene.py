@@ -35,6 +35,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python < 3.11
     import tomli as tomllib
 
 from ..errors import FemElasticError, InvalidParameter
+from ..resources import check_input_file
 from .toml_lines import KeyLines as _KeyLines
 from .scene_schema import (
     CALIBRATIONS,
@@ -195,6 +196,10 @@ def parse_scene(text: str, *, source: str = "<string>", base_dir=".") -> "Scene"
     )
 
 
+#: The largest scene file read (bytes): a scene is a page of TOML; beyond this it is the wrong file.
+MAX_SCENE_BYTES = 4 * 2**20
+
+
 def load_scene(path) -> "Scene":
     """Read and check a scene file (see :func:`parse_scene`).
 
@@ -210,6 +215,8 @@ def load_scene(path) -> "Scene":
     """
     path = Path(path)
     try:
+        # by type and size before reading: a FIFO or device would block or never end
+        check_input_file(path, MAX_SCENE_BYTES, "scene file")
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise SceneError(f"scene file {str(path)!r} not found; check the path.", file=str(path)) from None
@@ -432,6 +439,10 @@ class Scene:
                 raise SceneError(f'the scene has no run "{name}"{hint} Its runs: '
                                  f'{", ".join(self.variants)}.', key="variants", file=self.source,
                                  suggestion=near)
+        if self.spec.get("bodies") is not None:  # [[body]] tables: one fe.MultiBody per run
+            from .scene_bodies import build_bodies
+
+            return [build_bodies(self, name) for name in names]
         if not self.static:
             self._steps()  # before the mesh: a wrong time table is cheap to tell
         mesh, mesh_info = self._mesh()
@@ -458,23 +469,26 @@ class Scene:
             As :meth:`build`: a mesh file that cannot be read, a boundary the
             mesh does not have, a vertex index out of range.
         """
+        if self.spec.get("bodies") is not None:  # [[body]] tables: the placed meshes as one
+            return self.build()[:1][0].model.mesh
         mesh, _ = self._mesh()
         self._check_boundaries(mesh)
         return mesh
 
-    def _mesh(self):
-        m = self.spec["mesh"]
+    def _mesh(self, m=None, where=("mesh",)):
+        """(mesh, info) of the ``[mesh]`` table, or of the mesh table ``m`` at path ``where``."""
+        m = self.spec["mesh"] if m is None else m
         from ..geometry.mesh import beam_mesh
 
         if m["kind"] == "beam":
-            mesh = self._guard(("mesh",), beam_mesh, m["length"], m["width"], m["height"], tuple(m["cells"]))
+            mesh = self._guard(where, beam_mesh, m["length"], m["width"], m["height"], tuple(m["cells"]))
             info = {"kind": "beam", "length": m["length"], "width": m["width"], "height": m["height"],
                     "cells": list(m["cells"])}
         else:
             path = Path(m["path"])
             full = path if path.is_absolute() else self.base_dir / path
             if not full.is_file():
-                raise self._error(("mesh", "path"), f'mesh file "{m["path"]}" not found (looked for '
+                raise self._error(where + ("path",), f'mesh file "{m["path"]}" not found (looked for '
                                   f"{full}; the path is relative to the scene file's folder).")
             from ..geometry.mesh_io import load_mesh
 
@@ -482,7 +496,7 @@ class Scene:
                 mesh = load_mesh(full, reorient=m["reorient"])
             except Exception as exc:  # any reader failure is a problem of this file
                 fix = " Try reorient = true." if "invert" in str(exc).lower() and not m["reorient"] else ""
-                raise self._error(("mesh", "path"), f"cannot use the mesh file {full}: {exc}{fix}") from None
+                raise self._error(where + ("path",), f"cannot use the mesh file {full}: {exc}{fix}") from None
             info = {"kind": "file", "path": str(m["path"]), "reorient": m["reorient"]}
         if m["translate"] is not None:
             mesh = mesh.translated(tuple(m["translate"]))
@@ -603,6 +617,19 @@ class Scene:
         d = spec["damping"]
         if d is not None:
             terms["damping"] = self._guard(("damping",), Rayleigh, d["alpha"], d["beta"])
+        c = spec.get("contact")
+        if c is not None and c["type"] == "ipc":
+            from ..physics.ipc_contact import IPCContact
+
+            terms["contact"] = self._guard(
+                ("contact",), IPCContact, c["dhat"], kappa="auto" if c["kappa"] is None else c["kappa"],
+                friction=c["friction"], epsv=c["epsv"], self_contact=c["self_contact"])
+        elif c is not None and c["type"] == "impulse":
+            from ..physics.impulse_contact import ImpulseContact
+
+            terms["contact"] = self._guard(
+                ("contact",), ImpulseContact, restitution=c["restitution"], friction=c["friction"],
+                thickness=c["thickness"], self_contact=c["self_contact"])
         return terms
 
     def _run(self, name: str, mesh, mesh_info: dict) -> BuiltRun:
@@ -685,6 +712,7 @@ class Scene:
                                         (spec["boundary"].get("displacement") or {}).items()},
             "gravity": None if spec["loads"]["gravity"] is None else list(spec["loads"]["gravity"]),
             "traction": {k: list(v) for k, v in spec["loads"]["traction"].items()},
+            "probe": {k: list(v) for k, v in ((spec.get("probe") or {}).get("points") or {}).items()},
             "driven": [dict(x) for x in spec["loads"]["driven"]],
             "ground": None if g is None else {"kind": "plane", "z": g["z"], "method": g["method"]},
             "damping": None if d is None else {"alpha": d["alpha"], "beta": d["beta"]},

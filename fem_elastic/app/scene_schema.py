@@ -109,7 +109,8 @@ CALIBRATIONS = {"van_gelder": van_gelder_stiffness, "lloyd": lloyd_stiffness}
 LINEAR_SOLVERS = {"auto": AutoSolver, "direct": DirectSolver, "amg": AMGSolver}
 MOTIONS = ("twist", "translate")
 RENDER_FORMATS = ("mp4", "gif", "png")
-COLOR_FIELDS = ("von_mises", "displacement")
+CONTACT_TYPES = ("ipc", "impulse")  # the [contact] table's types (physics.ipc_contact, physics.impulse_contact)
+COLOR_FIELDS = ("von_mises", "displacement", "body")  # "body": a [[body]] scene's bodies
 
 
 # ---------------------------------------------------------------------------------------
@@ -239,6 +240,10 @@ def _output_rule(table: dict, path: tuple) -> dict:
     return table
 
 
+#: The largest render width or height (px): 8K; a frame of 8192 x 8192 RGB is 200 MB already.
+MAX_RENDER_SIDE = 8192
+
+
 #: A run's name is the name of its directory under the output directory.
 RUN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]*")
 
@@ -293,7 +298,6 @@ def _body_rule(table: dict, path: tuple) -> dict:
     lacking = [k for k in pair if k not in given][0]
     raise Invalid(path + (lacking,), f"missing required key {lacking}: {pair[0]} needs {pair[1]} "
                                      f"(give E and nu, or mu and lam).")
-
 
 BODY = Table(
     "body",
@@ -448,6 +452,29 @@ SCENE_FILE = Table(
                 when={"method": ("impulse",)}),
             Key("friction", Number(ge=0), 0.0, doc="Coulomb coefficient", when={"method": ("impulse",)}),
         ), "A ground plane z = const (fe.Ground); no contact if absent."), ABSENT, doc="ground contact"),
+        Key("contact", Table("contact", (
+            Key("type", Choice(CONTACT_TYPES), REQUIRED,
+                doc="ipc: barrier contact between bodies and with itself, through ipctk | impulse: the "
+                "notes' impulse collisions after each explicit or position-based step"),
+            Key("dhat", Number(gt=0), 1e-3, "m", "IPC barrier activation distance",
+                when={"type": ("ipc",)}),
+            Key("kappa", Number(gt=0), ABSENT, "N/m^3", "IPC barrier stiffness (default: adaptive)",
+                when={"type": ("ipc",)}),
+            Key("friction", Number(ge=0), 0.0, doc="Coulomb coefficient (lagged IPC friction)",
+                when={"type": ("ipc",)}),
+            Key("epsv", Number(gt=0), 1e-3, "m/s", "friction smoothing velocity",
+                when={"type": ("ipc",)}),
+            Key("self_contact", Boolean(), True, doc="surfaces of one body collide with each other",
+                when={"type": ("ipc", "impulse")}),
+            Key("restitution", Number(ge=0, le=1), 0.0, doc="impulse: 0 no bounce, 1 elastic",
+                when={"type": ("impulse",)}),
+            Key("friction", Number(ge=0), 0.0, doc="Coulomb coefficient on the impulses",
+                when={"type": ("impulse",)}),
+            Key("thickness", Number(gt=0), 1e-3, "m", "impulse contact distance (above relative "
+                "speed times dt)", when={"type": ("impulse",)}),
+        ), "Contact between bodies and self-contact (fe.IPCContact or fe.ImpulseContact); none if "
+           "absent."), ABSENT,
+            doc="contact between bodies"),
         Key("damping", Table("damping", (
             Key("alpha", Number(ge=0), ABSENT, "1/s", "mass-proportional coefficient"),
             Key("beta", Number(ge=0), ABSENT, "s", "stiffness-proportional coefficient"),
@@ -460,6 +487,11 @@ SCENE_FILE = Table(
         ), "Initial state (default: at rest in the reference configuration)."), ABSENT,
             doc="initial state"),
         Key("solve", SOLVE, {}, doc="dynamic (time stepping, the default) or static (a load path)"),
+        Key("probe", Table("probe", (
+            Key("points", NamedVectors(), {}, "m", "{name = [x, y, z]} reference points, e.g. "
+                "{ tip = [1.0, 0.05, 0.05] }"),
+        ), "Named points whose displacement is recorded over time (at the nearest vertex) in "
+           "summary.json and printed by `fem-elastic run`."), ABSENT, doc="probe points"),
         Key("integrator", INTEGRATOR, REQUIRED, doc="the time integrator"),
         Key("time", Table("time", (
             Key("dt", Number(gt=0), REQUIRED, "s", "time step", default_text="0.0166667"),
@@ -473,8 +505,9 @@ SCENE_FILE = Table(
             Key("render", Array(Choice(RENDER_FORMATS), None, 'array of "mp4" | "gif" | "png"'),
                 ["mp4"], doc="movies and pictures to render ([] for none)"),
             Key("color_by", Choice(COLOR_FIELDS), "von_mises", doc="field the renders are coloured by"),
-            Key("size", Array(Integer(ge=16), 2, "[width, height] integers >= 16"), [960, 540], "px",
-                "render size"),
+            Key("size", Array(Integer(ge=16, le=MAX_RENDER_SIDE), 2,
+                              f"[width, height] integers from 16 to {MAX_RENDER_SIDE}"), [960, 540], "px",
+                "render size (bounded: an 8K frame is 8192 px wide; larger ones exhaust memory)"),
             Key("fps", Integer(ge=1), 30, "frames/s", "movie frame rate"),
         ), "What the run writes.", rule=_output_rule), {}, doc="outputs"),
         Key("compare", TableArray(COMPARE), [], doc="further runs, [[compare]]"),
@@ -545,7 +578,11 @@ def validate(document: dict) -> dict:
     ([20, 2, 2], 1, None, None)
     """
     solve = document.get("solve") if isinstance(document, dict) else None
-    if isinstance(solve, dict) and solve.get("kind") == "static":
+    from .scene_bodies import is_multibody, validate_bodies
+
+    if is_multibody(document):  # [[body]] tables: several bodies (fem_elastic.app.scene_bodies)
+        spec = validate_bodies(document)
+    elif isinstance(solve, dict) and solve.get("kind") == "static":
         spec = _validate_static(document)
     else:
         spec = SCENE_FILE.check(document, ())
@@ -662,4 +699,7 @@ def schema_help() -> str:
                 out += textwrap.wrap(f"{name}: {text}", 96, initial_indent="    ",
                                      subsequent_indent="      ")
         out.append("")
+    from .scene_bodies import multibody_help
+
+    out.append(multibody_help())  # [[body]] tables: several bodies (fem_elastic.app.scene_bodies)
     return "\n".join(out).rstrip() + "\n"

@@ -25,6 +25,8 @@ log = logging.getLogger(__name__)
 
 
 def _support_name(where) -> str:
+    if hasattr(where, "body") and hasattr(where, "where"):  # a fe.MultiBody's BodyBoundary
+        return f"{where.body}:{_support_name(where.where)}"
     if isinstance(where, str):
         return where
     if isinstance(where, (list, tuple)) and where and all(isinstance(w, str) for w in where):
@@ -105,6 +107,12 @@ def run_static_variant(run, out_dir):
         writer.write_state(State(point.x, v0, float(point.load_factor)))
     elapsed = time.perf_counter() - t0
     figures = static_figures(model, result)
+    probes = (run.info or {}).get("probe")
+    if probes and len(result.path):
+        from .result_files import probe_figures
+
+        figures["probes"] = probe_figures(model, probes, result.path.load_factors,
+                                          result.path.displacements)
     if caught:
         figures["warnings"] = [str(w.message) for w in caught]
     message = message or result.message

@@ -87,6 +87,12 @@ class _Setup:
     """What projective dynamics needs of a model, built once per model: not a setting."""
 
     def __init__(self, model):
+        if getattr(model, "models", None) is not None:
+            raise InvalidParameter(
+                f"projective dynamics takes one body (a fe.Model); a fe.MultiBody of {len(model.models)} bodies is "
+                "not supported by it: simulate several bodies with fe.ImplicitEuler, fe.SymplecticEuler, "
+                "fe.Newmark or the other force-based integrators, or put the pieces in one mesh."
+            )
         body = model.body_potential
         material = getattr(body, "material", None)
         if not isinstance(body, ElasticPotential) or not isinstance(material, Material):
@@ -264,6 +270,11 @@ class ProjectiveDynamics(Integrator):
         inv_h2 = 1.0 / (h * h)
         pot = setup.potential
         contacts = model.contacts
+        bound = getattr(model, "contact", None)
+        max_step = model.max_step if getattr(bound, "kind", None) == "potential" else None
+        if max_step is not None and max_step(state.x, x - state.x) < 1.0:
+            x = state.x.copy()  # the inertial prediction passes through a contact: start at x_n
+            x[dofs] = xc
         for k in range(self.iterations):
             t0 = time.perf_counter()
             g = pot.gradient(x) - f_ext  # the local step (projections) and the elastic gradient
@@ -284,6 +295,8 @@ class ProjectiveDynamics(Integrator):
                 )
             t0 = time.perf_counter()
             dx = self._global_solve(g.reshape(-1, 3), free3, solvers)
+            if max_step is not None:  # IPC: never step into intersection (CCD)
+                dx = dx * max_step(x, dx.ravel())
             x += dx.ravel()
             stats.seconds["solve"] += time.perf_counter() - t0
             stats.newton_iterations += 1

@@ -476,6 +476,12 @@ class ShapeMatching(Integrator):
     def step(self, model, state: State, dt: float) -> State:
         h = check_dt(dt)
         check_state(model, state)
+        if getattr(model, "models", None) is not None:
+            raise InvalidParameter(
+                f"ShapeMatching takes one body (a fe.Model); a fe.MultiBody of {len(model.models)} bodies is "
+                "not supported by it: simulate several bodies with fe.ImplicitEuler, fe.SymplecticEuler, "
+                "fe.Newmark or the other force-based integrators, or put the pieces in one mesh."
+            )
         stats = self.last_stats = StepStats()
         sm = self.matcher(model, state.t + h)
         f = model.external_force()

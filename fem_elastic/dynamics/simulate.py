@@ -82,7 +82,8 @@ def simulate(
     steps : int, optional
         Number of steps.
     state : State, optional
-        Initial state; default ``fe.State.rest(model)``.
+        Initial state; default ``fe.State.rest(model)`` (a ``fe.MultiBody``: its bodies'
+        initial velocities).
     record_every : int
         Record a frame every this many steps (the first and last are always recorded).
     progress : bool
@@ -152,7 +153,9 @@ def simulate(
     ((6,), (6, 20, 3), True)
     """
     h = check_dt(dt)
-    state = State.rest(model) if state is None else state
+    if state is None:  # a MultiBody starts its bodies with their initial velocities
+        v0 = getattr(model, "initial_velocity", None)
+        state = State.rest(model) if v0 is None else State.rest(model, velocity=v0().reshape(-1, 3))
     check_state(model, state)
     n_steps = _n_steps(h, t_end, steps, state.t)
     _check_options(integrator, callback, record_every, energy_growth, observers)
@@ -162,7 +165,11 @@ def simulate(
                                 checkpoint_dir, checkpoint_every, resume, 9 + 6 * model.mesh.p.shape[1])
     run = Run(model, integrator, h, n_steps, int(record_every), state, start)
     watch = BlowUpWatch(energy_growth, check_every=min(int(record_every), 10))
-    chain = [watch, InversionWatch(), Recorder(), *([Callback(callback)] if callback is not None else []),
+    from .contact_watch import ContactWatch, has_contact_diagnostics
+
+    contact_watch = [ContactWatch()] if has_contact_diagnostics(model) else []  # before the writers
+    chain = [watch, InversionWatch(), Recorder(), *contact_watch,
+             *([Callback(callback)] if callback is not None else []),
              *observers,
              *([CheckpointWriter(ckpt, watch)] if ckpt is not None else []),
              *([ProgressBar()] if progress else [])]
@@ -322,7 +329,12 @@ class Run:
         self.stats = {k: np.zeros(n_steps, dtype=np.int64) for k in COUNT_FIELDS}
         self.stats.update({k: np.zeros(n_steps) for k in STEP_FIELDS[len(COUNT_FIELDS):]})
         self.stats["min_det_F"][:] = np.nan  # measured by the InversionWatch on every accepted step
+        from .contact_watch import contact_stats, has_contact_diagnostics
+
+        if has_contact_diagnostics(model):  # min distance, active contacts, force (ContactWatch)
+            self.stats.update(contact_stats(n_steps))
         self.resumed_from = resumed_from
+        self.t0 = float(state.t)  # the run's start: step k ends at exactly t0 + (k + 1) dt
         self.state, self.steps_done, self.frames, self.cuts, self._wall0 = state, 0, [], [], 0.0
         if resumed_from is not None:  # everything the loop had in hand at the checkpoint
             ck = resumed_from
@@ -361,6 +373,11 @@ class Run:
             self._collect_cuts(k, getattr(self.integrator, "last_stats", None))
             raise self.failed(err) from err
         self.stats["seconds_step"][k] = time.perf_counter() - t0
+        t_exact = self.t0 + (k + 1) * self.dt  # the step's time n dt, not a sum of n rounded dt
+        if new.t != t_exact:
+            # in place, before anyone but the integrator has seen it: integrators that remember
+            # their last state (Newmark's acceleration) know it by identity
+            object.__setattr__(new, "t", t_exact)
         st = self.integrator.last_stats
         for name in COUNT_FIELDS:
             self.stats[name][k] = getattr(st, name, 1 if name == "substeps" else 0)
@@ -383,6 +400,7 @@ class Run:
             steps=k, dt=self.dt, integrator=getattr(self.integrator, "name", str(self.integrator)),
             final_state=self.state, cuts=list(self.cuts),
         )
+        traj.model = self.model  # for traj.to_pyvista, plot and save
         if completed:
             traj.message = f"completed {k} steps to t = {self.state.t:.6g} s"
             if self.resumed_from is not None:

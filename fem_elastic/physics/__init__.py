@@ -15,7 +15,9 @@ from .analytic import RectangularCantilever, elastica_tip
 from .damping import Rayleigh
 from .driven import Motion, Prescribed, Translate, Twist
 from .elastic_body import ElasticBody, ElasticPotential
+from .collision_surface import CollisionSurface, collision_surface
 from .fields import CellFields, cell_fields, von_mises
+from .ipc_contact import BoundIPCContact, IPCContact
 from .mixed_body import MixedPotential
 from .model import Model
 from .obstacles import Box, Ground, Obstacle, Sphere
@@ -24,6 +26,7 @@ from .springs import MassSpring, SpringPotential, lloyd_stiffness, van_gelder_st
 from .stiffness_warping import WarpedStiffness
 
 __all__ = [
+    "BoundIPCContact", "CollisionSurface", "IPCContact", "collision_surface",
     "Box", "CellFields", "ElasticBody", "ElasticPotential", "Ground", "LinearPotential",
     "MassSpring", "MixedPotential", "Model", "Motion", "Obstacle", "Potential", "Prescribed", "Rayleigh",
     "RectangularCantilever", "Sphere", "SpringPotential", "Translate", "Twist", "WarpedStiffness",

@@ -146,6 +146,13 @@ class CellFields:
 
     def __init__(self, model):
         self.model = model
+        parts = getattr(model, "models", None)
+        if parts is not None:  # a fe.MultiBody: each body's fields, the bodies' tets stacked
+            self._parts = [CellFields(m) for m in parts]
+            self.potential = model.body_potential
+            self.volume = np.concatenate([f.volume for f in self._parts])
+            self._evaluate = self._stacked
+            return
         space = model.space
         self.potential = pot = model.body_potential
         #: ``(n_tets,)`` reference volume of each tet (m^3).
@@ -209,6 +216,8 @@ class CellFields:
             ``(3, 3, n_tets)`` stress (Pa).
         """
         x = self._check(x)
+        if getattr(self, "_parts", None) is not None:
+            return np.concatenate([f.stress(xb) for f, (_, xb) in zip(self._parts, self.model._split(x))], axis=2)
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             if isinstance(self.potential, ElasticPotential):
                 sig, J, _ = self._fem_parts(x)
@@ -222,6 +231,17 @@ class CellFields:
         for c, (i, j) in zip(comps, _SYM):
             out[i, j] = out[j, i] = c
         out[:, :, bad] = np.nan
+        return out
+
+    def _stacked(self, x):
+        """A MultiBody's fields: each body's, concatenated in the order of its tets, and ``body``.
+
+        ``body`` (float, for VTU cell data) is the index of each tet's body in
+        ``model.bodies``, which lets ParaView and the renderer tell the bodies apart.
+        """
+        parts = [f._evaluate(xb) for f, (_, xb) in zip(self._parts, self.model._split(x))]
+        out = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
+        out["body"] = self.model.body_of_tet.astype(float)
         return out
 
     # FEM ---------------------------------------------------------------------------

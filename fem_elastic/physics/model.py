@@ -35,6 +35,7 @@ from .loads import gravity_load, traction_load
 from .supports import describe_rigid_modes, nodes_of, resolve_displacement, resolve_fixed
 from ..discretization.mass import consistent_mass, lumped_mass
 from ..geometry.mesh import validate_mesh
+from ..resources import check_memory, model_memory
 
 __all__ = ["Model"]
 
@@ -85,6 +86,13 @@ class Model:
         ``{boundary name: motion}``, e.g. ``{"right": fe.Twist(2 * np.pi, duration=1.0)}``:
         the boundary's DOFs follow the motion until its release time. A
         static solve holds them at the reference position.
+    contact : object with ``bind(model)``, or None
+        Contact between bodies and of a body with itself, on the model's
+        :meth:`collision_surface`, e.g. ``fe.IPCContact(dhat=1e-3)``. Its
+        bound object (``model.contact``) is either a Potential (``kind ==
+        "potential"``: added to the energy, and its ``max_step`` bounds every
+        Newton step, see :meth:`max_step`) or an impulse response (``kind ==
+        "impulse"``: applied after each explicit step). None: no such contact.
 
     Examples
     --------
@@ -98,9 +106,12 @@ class Model:
 
     def __init__(
         self, mesh, density, body, fixed=None, gravity=None, traction=None,
-        ground=None, damping=None, driven=None, displacement=None,
+        ground=None, damping=None, driven=None, displacement=None, contact=None,
     ):
         validate_mesh(mesh)
+        # memory, from the counts alone: a model that cannot fit says so now, not after minutes
+        check_memory(model_memory(mesh.t.shape[1], mesh.p.shape[1], getattr(body, "order", 1)),
+                     f"this model ({mesh.t.shape[1]} tets, order {getattr(body, 'order', 1)})")
         if isinstance(density, bool) or not isinstance(density, (int, float, np.number)):
             raise InvalidParameter(f"density must be a number (kg/m^3), got {density!r}.")
         if not math.isfinite(density) or density <= 0:
@@ -154,6 +165,54 @@ class Model:
         for arr in (self.free, self.fixed_dofs, self.prescribed_dofs, self.prescribed_values,
                     self.held_dofs):
             arr.setflags(write=False)
+        #: the bound ``contact=`` object (IPC potential or impulse response), or None
+        self.contact = self._bind_contact(contact)
+
+    # contact between bodies (the ``contact=`` argument) --------------------------------------
+    def _bind_contact(self, contact):
+        if contact is None:
+            return None
+        if isinstance(contact, type) or not hasattr(contact, "bind"):
+            raise InvalidParameter(
+                "contact must be an object with bind(model), e.g. fe.IPCContact(dhat=1e-3), or "
+                f"None; got {contact!r}."
+            )
+        bound = contact.bind(self)
+        kind = getattr(bound, "kind", None)
+        if kind == "potential":
+            self.contacts = (*self.contacts, bound)
+            self.potentials = (*self.potentials, bound)
+        elif kind != "impulse":
+            raise InvalidParameter(
+                f"contact {contact!r} bound to an object of kind {kind!r}; it must be "
+                "'potential' (a barrier energy such as fe.IPCContact) or 'impulse'."
+            )
+        return bound
+
+    def collision_surface(self):
+        """The boundary triangles of the mesh on the model's DOFs (cached), for contact.
+
+        See :func:`fem_elastic.physics.collision_surface.collision_surface`:
+        outward triangles, P2 meshes by their vertices; :class:`fe.InvalidMesh`
+        for a mesh with no surface.
+        """
+        surface = self.__dict__.get("_collision_surface")
+        if surface is None:
+            from .collision_surface import collision_surface
+
+            surface = self.__dict__["_collision_surface"] = collision_surface(self)
+        return surface
+
+    def max_step(self, x: np.ndarray, dx: np.ndarray) -> float:
+        """The largest fraction in (0, 1] of the step ``dx`` from ``x`` free of collisions.
+
+        Continuous collision detection of a potential contact (IPC); 1.0 for
+        a model without one. Newton's line search starts at this fraction.
+        """
+        bound = self.contact
+        if bound is None or getattr(bound, "kind", None) != "potential":
+            return 1.0
+        return float(bound.max_step(x, dx))
 
     # sizes and maps -----------------------------------------------------------
     @property
@@ -169,6 +228,38 @@ class Model:
     def to_vertices(self, x: np.ndarray) -> np.ndarray:
         """Vertex values ``(n_vertices, 3)`` of a flat DOF vector."""
         return self.space.to_vertices(x)
+
+    # looking at it (fem_elastic.physics.result_view, pyvista_grid) -----------------------
+    def __repr__(self) -> str:
+        from .result_view import model_rows, text_table
+
+        return text_table("Model", model_rows(self))
+
+    def _repr_html_(self) -> str:
+        from .result_view import html_table, model_rows
+
+        return html_table("Model", model_rows(self))
+
+    def to_pyvista(self, x: np.ndarray | None = None, v: np.ndarray | None = None):
+        """The body at DOF positions ``x`` (default: at rest) as a pyvista ``UnstructuredGrid``.
+
+        Reference points, point data ``displacement`` (m) and ``velocity`` (m/s),
+        cell data ``von_mises`` (Pa) and ``energy_density`` (J/m^3); P2 bodies as
+        quadratic tets (VTK type 24). See :func:`fem_elastic.physics.pyvista_grid.body_grid`.
+        """
+        from .pyvista_grid import body_grid
+
+        return body_grid(self, x, v)
+
+    def plot(self, x: np.ndarray | None = None, **kwargs):
+        """Draw the body (at ``x``, default at rest) with pyvista; returns the plotter.
+
+        Keywords go to :func:`fem_elastic.physics.pyvista_grid.plot_grid`
+        (``off_screen=True``, ``screenshot=path``, ``magnification``, ...).
+        """
+        from .pyvista_grid import plot_grid
+
+        return plot_grid(self.to_pyvista(x), **kwargs)
 
     @cached_property
     def mass_matrix(self) -> sp.csr_matrix:
@@ -288,10 +379,14 @@ class Model:
 
     # contact and driven boundaries ---------------------------------------------------
     def respond_contacts(self, x: np.ndarray, v: np.ndarray):
-        """Apply the obstacles' impulse responses (for ``method="impulse"``); returns (x, v)."""
+        """Apply the impulse responses: obstacles with ``method="impulse"``, then an
+        impulse ``contact=`` (``fe.ImpulseContact``, between bodies and self-contact); (x, v)."""
         for obstacle in self.obstacles:
             if getattr(obstacle, "method", None) == "impulse":
                 x, v = obstacle.respond(x, v, self.lumped_mass[0::3])
+        bound = getattr(self, "contact", None)
+        if bound is not None and getattr(bound, "kind", None) == "impulse":
+            x, v = bound.respond(x, v, self.lumped_mass[0::3])
         return x, v
 
     def constraints(self, t: float):
@@ -358,7 +453,7 @@ class Model:
                 "driven must be a dict {boundary name: motion}, e.g. "
                 f"{{'right': fe.Twist(6.283, duration=1.0)}}; got {driven!r}."
             )
-        out = []
+        out, names = [], []
         held = self.held_dofs
         self._driven_components = []
         for name, motion in driven.items():
@@ -375,10 +470,26 @@ class Model:
             # (a node held in some components only is driven in the others)
             free_comp = ~np.isin(dofs, held)
             keep = free_comp.any(axis=1)
+            if not keep.any():  # a boundary both fixed and driven: the motion would move nothing
+                raise InvalidParameter(
+                    f"driven boundary {name!r} is also fixed (or prescribed) in every component of "
+                    "every node, so its motion would move nothing: a boundary cannot be both held "
+                    f"and driven. Remove {name!r} from fixed (or displacement), or from driven."
+                )
             if not free_comp.all():
                 log.info("driven boundary %r: %d node(s) are also fixed and stay fixed", name,
                          int((~free_comp).any(axis=1).sum()))
             dofs = dofs[keep]
+            for (_, _, other), other_name in zip(out, names):  # two motions for one vertex
+                shared = np.intersect1d(dofs[:, 0], other[:, 0])
+                if shared.size:
+                    raise InvalidParameter(
+                        f"driven boundaries {other_name!r} and {name!r} share {shared.size} node(s) "
+                        f"(e.g. node {shared[0] // 3} at {np.round(self.X[shared[0]:shared[0] + 3], 6).tolist()} m), "
+                        "which would follow two motions at once. Drive the union with one motion, "
+                        "fix the shared edge, or drive boundaries that do not touch."
+                    )
+            names.append(name)
             self._driven_components.append(free_comp[keep])
             out.append((motion, self.X[dofs], dofs))
         return tuple(out)
@@ -405,7 +516,7 @@ class Model:
 
         Energy differences below this carry no information (see
         ``ElasticPotential.energy_roundoff``); the dead loads are exact linear
-        functions and add only eps |Pi|, which Newton adds itself.
+        functions and add only ``eps |Pi|``, which Newton adds itself.
         """
         return self.body_potential.energy_roundoff()
 
@@ -458,6 +569,63 @@ class Model:
         """Scalar nodes (vertices and P2 edge nodes) of a boundary name, names, indices or mask."""
         return nodes_of(self.space, where, "boundary")
 
+    def _check_pieces_reached(self, held: np.ndarray) -> None:
+        """:class:`UnderConstrained` if a connected piece of the mesh holds no fixed or driven DOF.
+
+        Not with contact (obstacles or ``contact=``): a piece may then rest on another, or on
+        the ground, and be held by the contact force.
+        """
+        from scipy.sparse.csgraph import connected_components
+
+        if self.contacts or getattr(self, "contact", None) is not None:
+            return
+
+        t = np.asarray(self.mesh.t)
+        nv = self.mesh.p.shape[1]
+        rows = np.repeat(t[:1], t.shape[0] - 1, axis=0).ravel()
+        graph = sp.coo_matrix((np.ones(rows.size), (rows, t[1:].ravel())), shape=(nv, nv))
+        n, label = connected_components(graph, directed=False)
+        if n == 1:
+            return
+        is_held = np.zeros(self.ndofs, dtype=bool)
+        is_held[held] = True
+        piece = label[t[0]]  # of each element (its vertices share one label)
+        reached = np.zeros(n, dtype=bool)
+        reached[piece[is_held[self.space.element_dofs].any(axis=0)]] = True
+        P = self.mesh.p
+        if reached.all():  # each piece must hold its own six rigid modes
+            dof_piece = np.empty(self.ndofs, dtype=np.int64)
+            dof_piece[self.space.element_dofs] = piece[None, :]
+            B = self.space.rigid_body_modes()
+            B[:, 3:] /= np.ptp(self.X.reshape(-1, 3), axis=0).max()  # rotations in units of length
+            for c in range(n):
+                h = held[dof_piece[held] == c]
+                s = np.linalg.svd(B[h], compute_uv=False) if h.size >= 6 else np.zeros(1)
+                if int(np.sum(s > 1e-8 * s[0])) < 6:  # relative to the largest: round-off level
+                    pts = P[:, label == c]
+                    lo, hi = pts.min(axis=1), pts.max(axis=1)
+                    raise UnderConstrained(
+                        f"the mesh has {n} separate pieces, and the one of {pts.shape[1]} vertices in "
+                        f"[{lo[0]:.4g}, {hi[0]:.4g}] x [{lo[1]:.4g}, {hi[1]:.4g}] x [{lo[2]:.4g}, "
+                        f"{hi[2]:.4g}] m is held at too few DOFs to stop it moving as a rigid body "
+                        f"({', '.join(describe_rigid_modes(self.X, h))}). Fix a face of that piece, or "
+                        "connect the pieces (merge coincident vertices where they touch)."
+                    )
+            return
+        lines = []
+        for c in np.flatnonzero(~reached)[:3]:
+            pts = P[:, label == c]
+            lo, hi = pts.min(axis=1), pts.max(axis=1)
+            lines.append(f"{pts.shape[1]} vertices in [{lo[0]:.4g}, {hi[0]:.4g}] x [{lo[1]:.4g}, "
+                         f"{hi[1]:.4g}] x [{lo[2]:.4g}, {hi[2]:.4g}] m")
+        more = f" (and {int((~reached).sum()) - 3} more)" if (~reached).sum() > 3 else ""
+        raise UnderConstrained(
+            f"the mesh has {n} separate pieces, {int((~reached).sum())} of which no support reaches (no "
+            f"fixed or driven DOF): {'; '.join(lines)}{more}. Such a piece is free to move as a rigid body, so a static "
+            "problem has no unique solution. Fix a boundary on each piece, connect the pieces (merge "
+            "coincident vertices where they touch), or remove the loose piece from the mesh."
+        )
+
     def check_supported(self) -> None:
         """Raise :class:`UnderConstrained` if the fixed DOFs leave rigid-body motion free.
 
@@ -475,6 +643,7 @@ class Model:
                 "problem has no unique solution. Fix a boundary, e.g. fe.Model(..., fixed='left'), "
                 "or vertex indices, or simulate the dynamics instead."
             )
+        self._check_pieces_reached(held)
         # svd returns min(n_fixed, 6) values: count the rank, not the small values
         s = np.linalg.svd(B[held], compute_uv=False)
         free_modes = 6 - int(np.sum(s > 1e-8 * s[0]))  # relative to the largest: round-off level

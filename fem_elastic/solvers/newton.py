@@ -135,6 +135,7 @@ def newton_minimize(
     gradient: Callable[[np.ndarray], np.ndarray] | None = None,
     inexact: bool = True,
     min_iter: int = 0,
+    max_step: Callable[[np.ndarray, np.ndarray], float] | None = None,
 ) -> NewtonResult:
     """Minimise ``energy`` from ``x0`` over the free DOFs.
 
@@ -199,6 +200,15 @@ def newton_minimize(
         its simplest form). Far from the solution a rough direction is as
         good as an exact one; as ``||g||`` falls eta falls with it, which
         keeps Newton's fast local convergence. Direct solvers ignore it.
+    max_step : callable, optional
+        ``(x, dx) -> fraction in [0, 1]``: the largest collision-free
+        fraction of the step (continuous collision detection of a contact
+        barrier, ``model.max_step``). The line search starts at that fraction
+        instead of 1, so no trial point ever crosses into intersection (the
+        barrier's energy is finite for intersecting states, it cannot tell).
+        With it the energy at ``x`` is re-evaluated after each linearization,
+        since a contact term may adapt its stiffness there (IPC's adaptive
+        barrier stiffness).
 
     Returns
     -------
@@ -277,6 +287,16 @@ def newton_minimize(
             )
             break
         alpha = 1.0
+        if max_step is not None:
+            e = energy(x)  # the contact stiffness may have changed in linearize
+            alpha = min(1.0, float(max_step(x, dx)))
+            if not alpha > 0.0:
+                result.message = (
+                    "the collision-free fraction of the Newton step is 0: the start of the step "
+                    "is in contact at distance 0 (check for intersecting bodies)"
+                )
+                result.iterations = it
+                break
         for cut in range(max_cuts + 1):
             x_try = x + alpha * dx
             e_try = energy(x_try)

@@ -43,9 +43,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InvalidParameter, NotConverged
+from ..physics.impulse_contact import reject_impulse_contact
 from .linear_solvers import AutoSolver, LinearSolverFailed, SingularMatrix
 from .newton import constrain, newton_minimize
 from .stability import UnstableEquilibrium, lowest_eigenpair
+from .static_view import StaticResultView
 
 __all__ = ["EquilibriumPoint", "LoadPath", "RoundoffWarning", "StaticResult", "UnstableEquilibrium",
            "load_path", "solve_static"]
@@ -95,8 +97,13 @@ def _vertex_forces(space, f: np.ndarray) -> np.ndarray:
     """Nodal forces ``(ndofs,)`` lumped onto the vertices, ``(n_vertices, 3)``.
 
     A P2 edge node's force goes half to each vertex of its edge: the total
-    (and so every boundary's resultant) is kept.
+    (and so every boundary's resultant) is kept. Several bodies (a
+    ``fe.MultiBody``'s stacked space): each body's, stacked.
     """
+    parts = getattr(space, "parts", None)
+    if parts is not None:
+        o = space.dof_offsets
+        return np.concatenate([_vertex_forces(s, f[o[b]:o[b + 1]]) for b, s in enumerate(parts)])
     fv = f[space.vertex_dofs].copy()
     if space.order == 2:
         mesh = space.mesh
@@ -186,9 +193,13 @@ class LoadPath(list):
         return np.stack([p.reaction_force(where) for p in self]) if self else np.zeros((0, 3))
 
 
-@dataclass
-class StaticResult:
+@dataclass(repr=False)
+class StaticResult(StaticResultView):
     """A static equilibrium.
+
+    ``repr(result)`` is a few lines (size, material, convergence, timings, the
+    largest displacement, the total reaction); ``to_pyvista``, ``plot``,
+    ``plot_history`` and ``save`` show it (:mod:`fem_elastic.solvers.static_view`).
 
     Attributes
     ----------
@@ -329,6 +340,14 @@ class _Problem:
         )
 
 
+def _contact_max_step(model):
+    """``model.max_step`` (CCD of an IPC contact) when the model has one, else None."""
+    contact = getattr(model, "contact", None)
+    if contact is None or getattr(contact, "kind", None) != "potential":
+        return None
+    return model.max_step
+
+
 def _predictor(model, problem, x, s, target, solver, near_null, pattern, seconds):
     """The start of a step that moves prescribed DOFs: the linear response of the free DOFs.
 
@@ -455,6 +474,7 @@ def solve_static(
             "need 0 < min_load_step <= initial_load_step <= 1, got "
             f"initial_load_step={initial_load_step!r}, min_load_step={min_load_step!r}."
         )
+    reject_impulse_contact(model, "fe.solve_static")
     model.check_supported()
     _check_conditioning(model)
     t_start = time.perf_counter()
@@ -503,6 +523,9 @@ def solve_static(
             if abs(target - round(target * steps) / steps) < 1e-12:
                 target = round(target * steps) / steps
         x0, pred = _predictor(model, problem, x, s, target, solver, near_null, pattern, total.seconds)
+        max_step = _contact_max_step(model)
+        if max_step is not None and pred and max_step(x, x0 - x) < 1.0:
+            x0, pred = x.copy(), 0  # the predictor would pass through a contact (IPC)
         res = newton_minimize(
             lambda y: model.energy(y, target),
             lambda y, proj: model.linearize(y, target, project=proj),
@@ -519,6 +542,7 @@ def solve_static(
             g_floor=g_floor,
             gradient=lambda y: model.gradient(y, target),
             min_iter=0 if pred else 1,
+            max_step=max_step,
         )
         total.iterations += res.iterations + pred
         total.residual_history.extend(res.residual_history)
@@ -561,13 +585,42 @@ def solve_static(
     total.reactions, total.reaction_dofs = last.reactions, last.reaction_dofs
     total.wall_time = time.perf_counter() - t_start
     if check and not total.converged:
+        diagnosis = _diagnose_failure(model, x, total)
         raise NotConverged(
-            f"solve_static did not reach the full load: {total.message}. Try more Newton "
-            "iterations (max_iter=...), a smaller first load step (initial_load_step=0.1), "
-            "or check that the load is physically attainable for this material.",
+            f"solve_static did not reach the full load: {total.message}. "
+            + (f"{diagnosis} " if diagnosis else "")
+            + "Try more Newton iterations (max_iter=...), a smaller first load step "
+            "(initial_load_step=0.1)"
+            + (", or check that the load is physically attainable for this material." if not diagnosis
+               else "."),
             result=total,
         )
     return total
+
+
+def _diagnose_failure(model, x, total) -> str:
+    """The cause of a failed load path, where one can be named (before the generic advice)."""
+    from ..physics.inversion import DetF
+
+    try:
+        J = DetF(model)(x)
+    except (ValueError, FloatingPointError):  # pragma: no cover - a state too broken to measure
+        return ""
+    if not np.all(np.isfinite(x)):
+        return "The last iterate is not finite."
+    bad = int(np.sum(J <= 0))
+    if bad:
+        return (f"At load factor {total.load_factor:.4g}, {bad} {DetF(model).where} have det F <= 0 "
+                f"(min {float(J.min()):.3g}): the load inverts elements, which this material "
+                "cannot follow; a finer mesh, order=2, or a material that allows inversion "
+                "(fe.StableNeoHookean) may carry it.")
+    if "inadmissible" in total.message or "not finite" in total.message:
+        return ("The energy is not finite at the start of the step: an element is inverted or "
+                "flattened in the reference or prescribed state (check the mesh and the prescribed "
+                "displacements).")
+    if "collision-free" in total.message:
+        return "Bodies intersect at the start of the step (check the obstacles' positions)."
+    return ""
 
 
 def _eigen(model, x, s, free, near_null, total, factor=None):
@@ -614,7 +667,8 @@ def _check_final(model, problem, total, x, free, near_null, stabilize, solver, p
             lambda y: model.energy(y, 1.0),
             lambda y, proj: model.linearize(y, 1.0, project=proj),
             best[0], free, linear_solver=solver, near_null=near_null, pattern=pattern,
-            gradient=lambda y: model.gradient(y, 1.0), min_iter=1, **kw,
+            gradient=lambda y: model.gradient(y, 1.0), min_iter=1,
+            max_step=_contact_max_step(model), **kw,
         )
         total.iterations += res.iterations
         total.residual_history.extend(res.residual_history)

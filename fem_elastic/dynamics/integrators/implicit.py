@@ -28,6 +28,7 @@ import numpy as np
 from ...errors import Diverged, InvalidParameter
 from ...solvers.linear_solvers import AutoSolver
 from ...materials import Corotated
+from ...physics.impulse_contact import reject_impulse_contact
 from ...solvers.newton import NewtonResult, _direction, newton_minimize
 from ..state import State
 from .base import Integrator, StepStats, check_dt, check_state
@@ -48,6 +49,9 @@ def _check_mass(mass):
     return mass
 
 
+#: Most halvings of a step (2^20 ~ 1e6 sub-steps at worst): beyond, lower dt.
+MAX_DT_CUTS = 20
+
 class _Implicit(Integrator):
     """Shared: constraints at the end of the step and step cutting on failure."""
 
@@ -61,14 +65,20 @@ class _Implicit(Integrator):
                 "linear_solver must be a solver object such as fe.DirectSolver(), fe.AMGSolver() "
                 f"or fe.AutoSolver(), got {linear_solver!r}."
             )
-        if isinstance(max_dt_cuts, bool) or not isinstance(max_dt_cuts, int) or max_dt_cuts < 0:
-            raise InvalidParameter(f"max_dt_cuts must be an integer >= 0, got {max_dt_cuts!r}.")
+        if (isinstance(max_dt_cuts, bool) or not isinstance(max_dt_cuts, int)
+                or not 0 <= max_dt_cuts <= MAX_DT_CUTS):
+            # bounded: k halvings can cost 2^k sub-steps for one step
+            raise InvalidParameter(
+                f"max_dt_cuts must be an integer from 0 to {MAX_DT_CUTS}, got {max_dt_cuts!r} (each cut halves "
+                f"dt, so {MAX_DT_CUTS} cuts already allow steps 2^{MAX_DT_CUTS} = {2 ** MAX_DT_CUTS:.2g} times "
+                "smaller); lower dt instead.")
         self.max_dt_cuts = max_dt_cuts
         self.linear_solver = linear_solver
 
     def step(self, model, state: State, dt: float) -> State:
         h = check_dt(dt)
         check_state(model, state)
+        reject_impulse_contact(model, f"fe.{self.name}")
         stats = self.last_stats = StepStats()
         out, why = self._cut_step(model, state, h, 0, stats)
         if out is None:
@@ -109,7 +119,16 @@ class _Implicit(Integrator):
             linear_solver=self.linear_solver,
             near_null=model.rigid_body_modes,
             pattern=model.space.pattern,
+            max_step=_contact_max_step(model),
         )
+
+
+def _contact_max_step(model):
+    """``model.max_step`` when the model has a potential contact with CCD (IPC), else None."""
+    contact = getattr(model, "contact", None)
+    if contact is None or getattr(contact, "kind", None) != "potential":
+        return None
+    return model.max_step
 
 
 class ImplicitEuler(_Implicit):
@@ -179,26 +198,46 @@ class ImplicitEuler(_Implicit):
         x0[dofs] = xc
         x_old = state.x.copy()
         x_old[dofs] = xc
+        max_step = _contact_max_step(model)
+        if max_step is not None and max_step(x_old, x0 - x_old) < 1.0:
+            x0 = x_old  # the prediction would pass through a contact: start from the old positions
         g0, g_old = G.energy(x0), G.energy(x_old)
         if not math.isfinite(g0) or g_old < g0:
             x0, g0 = x_old, g_old
         if not math.isfinite(g0):
             return None, _INVERTED_AT_START
         scale = G.scale(state, free)
-        counted = _Counted(G)
-        res = newton_minimize(
-            G.energy, counted.linearize, x0, free, rtol=self.rtol, g_scale=scale if scale > 0 else None,
-            max_iter=self.max_iter, energy_roundoff=G.energy_roundoff(x0), project=self.project,
-            gradient=counted.gradient, g_floor=G.gradient_roundoff(x0), **self._solver_settings(model),
-        )
-        stats.newton_iterations += res.iterations
-        stats.gradient_evaluations += counted.calls
-        stats.line_search_cuts += res.line_search_cuts
-        stats.linear_iterations += res.linear_iterations
-        for k, v in res.seconds.items():
-            stats.seconds[k] = stats.seconds.get(k, 0.0) + v
-        if not res.converged:
-            return None, f"Newton did not converge ({res.message})"
+        # lagged friction (IPC): solve with the friction of the start of the step, re-lag at the
+        # solution and solve again, friction_iterations times in all
+        contact = model.contact if max_step is not None else None
+        lag = getattr(contact, "lag_friction", None) if getattr(contact, "mu", 0.0) > 0 else None
+        rounds = contact.spec.friction_iterations if lag is not None else 1
+        if contact is not None and hasattr(contact, "begin_solve"):
+            contact.begin_solve(G.gradient)  # IPC's kappa balances against the whole G
+        try:
+            for r in range(rounds):
+                if lag is not None:  # the first round lags at the start of the step
+                    lag(state.x, x_old if r == 0 else x0, h)
+                counted = _Counted(G)
+                res = newton_minimize(
+                    G.energy, counted.linearize, x0, free, rtol=self.rtol,
+                    g_scale=scale if scale > 0 else None, max_iter=self.max_iter,
+                    energy_roundoff=G.energy_roundoff(x0), project=self.project,
+                    gradient=counted.gradient, g_floor=G.gradient_roundoff(x0),
+                    **self._solver_settings(model),
+                )
+                stats.newton_iterations += res.iterations
+                stats.gradient_evaluations += counted.calls
+                stats.line_search_cuts += res.line_search_cuts
+                stats.linear_iterations += res.linear_iterations
+                for k, v in res.seconds.items():
+                    stats.seconds[k] = stats.seconds.get(k, 0.0) + v
+                if not res.converged:
+                    return None, f"Newton did not converge ({res.message})"
+                x0 = res.x
+        finally:
+            if lag is not None:
+                contact.clear_friction()
         x1 = res.x
         v1 = self._velocity(state, x1, h)
         return self._finish(model, x1, v1, state.t + h), ""

@@ -103,6 +103,12 @@ def check_p1_body(model, who: str):
     """The model's finite element body if it is a P1 ``fe.ElasticBody``; else InvalidParameter."""
     from ...physics.elastic_body import ElasticBody
 
+    if getattr(model, "models", None) is not None:
+        raise InvalidParameter(
+            f"{who} takes one body (a fe.Model); a fe.MultiBody of {len(model.models)} bodies is "
+            "not supported by it: simulate several bodies with fe.ImplicitEuler, fe.SymplecticEuler, "
+            "fe.Newmark or the other force-based integrators, or put the pieces in one mesh."
+        )
     body = model.body
     if not isinstance(body, ElasticBody):
         raise InvalidParameter(
@@ -244,6 +250,9 @@ class PositionBased(Integrator):
             _damp(v, p, setup.mass, w > 0.0, self.damping)
         if push.any():
             _respond(p, v, v_pred, setup, push, free3, h)
+        contact = getattr(model, "contact", None)  # fe.ImpulseContact: between parts, self-contact
+        if contact is not None and getattr(contact, "kind", None) == "impulse":
+            p, v = contact.respond(p, v, setup.mass)
         p[dofs] = xc
         v[dofs] = vc
         self._last_multipliers = lams
