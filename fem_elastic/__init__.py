@@ -45,6 +45,7 @@ from .app import (
     write_summary,
     write_vtu_frame,
 )
+from .dynamics.contact_watch import ContactIntersectionWarning
 from .dynamics import (
     RK4,
     Checkpoint,
@@ -187,7 +188,7 @@ __all__ = [
     "material_from_energy", "energies", "MissingDependency",
     "mesh_quality", "remove_unused_vertices", "reorient", "save_mesh", "signed_volumes",
     "solve_static", "validate_mesh",
-    "InversionWarning", "StepFailed",
+    "InversionWarning", "StepFailed", "ContactIntersectionWarning",
     "OutputInUse", "ResourceLimit", "WriteFailed",
     "EquilibriumPoint", "LoadPath", "RoundoffWarning", "UnstableEquilibrium", "load_path",
     "ProjectiveCorotated", "ProjectiveDynamics", "ShapeMatcher", "ShapeMatching",

@@ -100,6 +100,13 @@ def _inverted_mesh():
     return fe.mesh_from_arrays(mesh.p.T, t, validate=False)
 
 
+def _overlapping_cubes():
+    """Two unit-cell cubes, the second pushed half into the first: one mesh, two pieces."""
+    cube = fe.beam_mesh(length=0.1, width=0.1, height=0.1, cells=(1, 1, 1))
+    P, T = cube.p.T, cube.t.T
+    return fe.mesh_from_arrays(np.vstack([P, P + [0.05, 0.01, 0.02]]), np.vstack([T, T + len(P)]))
+
+
 _TET = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
 
 
@@ -501,6 +508,13 @@ BAD_INPUTS: list[BadInput] = [
              lambda tmp: fe.ImplicitEuler().step(m := _model(contact=fe.ImpulseContact()), fe.State.rest(m), 1e-3),
              IP, "fe.ImplicitEuler cannot apply fe.ImpulseContact",
              "Use contact=fe.IPCContact(dhat=...) with this solver"),
+    BadInput("IPC contact with dhat = 0", lambda tmp: fe.IPCContact(dhat=0.0), IP,
+             "dhat must be a finite number > 0", "e.g. 1e-3 for a body of about 1 m"),
+    BadInput("two bodies overlapping at t = 0 with IPC contact",
+             lambda tmp: fe.Model(_overlapping_cubes(), density=1000.0, body=_body(),
+                                  contact=fe.IPCContact(dhat=1e-3, kappa=1e4)), IP,
+             "surfaces intersect in the reference configuration (overlapping bodies at t = 0)",
+             "Move the bodies apart"),
     # meshes
     BadInput("an inverted element in the mesh", lambda tmp: _model(_inverted_mesh()), IM,
              "1 tets are inverted (negative signed volume): elements [0]", "fem_elastic.reorient(mesh)"),

@@ -337,3 +337,22 @@ def test_has_intersections_sees_overlapping_cubes_only():
     assert contact.has_intersections(X.ravel())
     X[n:] += [0.0, 0.2, 0.0]  # moved aside: apart again
     assert not contact.has_intersections(X.ravel())
+
+
+def test_run_summary_reports_the_average_contact_force_of_the_impulses():
+    """fe.simulate records an impulse contact's force as its impulse over the step (N)."""
+    model, n, _ = _two_cubes(fe.ImpulseContact(restitution=0.5, thickness=3e-3), offset=(0.12, 0.02, 0.03))
+    v0 = np.zeros((2 * n, 3))
+    v0[:n, 0], v0[n:, 0] = 1.0, -1.0
+    dt = 1e-3
+    traj = fe.simulate(model, fe.SymplecticEuler(), dt, steps=40, state=fe.State(model.X.copy(), v0.ravel(), 0.0))
+    force = np.asarray(traj.step_stats["contact_force"])
+    assert np.isfinite(force).all() and (force >= 0).all()
+    summary = traj.summary()
+    assert summary["contact_steps_in_contact"] > 0
+    # the cubes (2 x 1 kg) reverse a 1 m/s approach with e = 0.5: total impulse on each side
+    # at least m * (1 + e) * 1 m/s spread over the contact steps; the peak average force must
+    # therefore reach that impulse over (steps in contact * dt) at least
+    mass_each = 1000.0 * 0.1 ** 3
+    floor = mass_each * 1.5 * 1.0 / (summary["contact_steps_in_contact"] * dt)
+    assert summary["contact_force_max"] >= floor

@@ -7,7 +7,8 @@ stores in ``run.stats`` (``Trajectory.step_stats``)
 - ``contact_min_distance`` (m): the smallest distance between surface primitives the contact
   reports (``inf`` when none is within its range, e.g. IPC's ``dhat``),
 - ``contact_active``: the number of active contact pairs,
-- ``contact_force`` (N): the total contact force magnitude,
+- ``contact_force`` (N): the total contact force magnitude (an impulse contact's summed
+  impulse over the step divided by ``dt``: its average force over the step),
 
 and at the end of the run it asks the contact whether the surface intersects itself
 (``has_intersections``, ipctk's exact test). A run that ends intersecting is never silent: a
@@ -59,7 +60,11 @@ class ContactWatch(Observer):
         k = event.k
         run.stats["contact_min_distance"][k] = float(d.get("min_distance", math.nan))
         run.stats["contact_active"][k] = float(d.get("active_contacts", 0))
-        run.stats["contact_force"][k] = float(d.get("contact_force", 0.0))
+        force = float(d.get("contact_force", 0.0))
+        if math.isnan(force) and "contact_impulse" in d:
+            # an impulse contact acts in no time: its average force over the step is J / h
+            force = float(d["contact_impulse"]) / run.dt
+        run.stats["contact_force"][k] = force
 
     def on_finish(self, run) -> None:
         self._check_end(run)
@@ -94,7 +99,7 @@ def summarize(step_stats: dict) -> dict:
     return {
         "contact_min_distance": float(d.min()) if d.size else None,
         "contact_active_max": int(np.nanmax(active)) if np.isfinite(active).any() else 0,
-        "contact_force_max": float(np.nanmax(force)) if np.isfinite(force).any() else 0.0,
+        "contact_force_max": float(np.nanmax(force)) if np.isfinite(force).any() else None,
         "contact_steps_in_contact": int(np.count_nonzero(active > 0)),
         "contact_intersecting_at_end": bool(np.nansum(inter) > 0),
     }
