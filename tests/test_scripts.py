@@ -64,3 +64,16 @@ def test_bench_static_stability_prints_its_ratio():
     assert "ratio" in median and "goal <= 0.3" in median
     # the clamped beam under its tip load is a stable equilibrium: the check must say so
     assert "stable=True" in r.stdout
+
+
+def test_bench_newton_amg_quick_prints_setups_per_step():
+    r = subprocess.run(
+        [sys.executable, str(SCRIPTS / "bench_newton_amg.py"), "--quick", "--repeats", "1",
+         "--steps", "1"],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert r.returncode == 0, r.stderr
+    after = r.stdout.split(" after:")[1]
+    # one AMG hierarchy per step with reuse (the quick beam needs no rebuild)
+    assert "AMG setups 1.00" in after.splitlines()[0]
+    assert "ratio after / before" in r.stdout

@@ -27,6 +27,7 @@ from ..errors import FemElasticError, InvalidParameter, NotConverged
 
 __all__ = [
     "LinearSolve", "DirectSolver", "AMGSolver", "AutoSolver", "SingularMatrix", "LinearSolverFailed",
+    "ReusedAMG", "preconditioned_cg",
 ]
 
 log = logging.getLogger(__name__)
@@ -56,6 +57,13 @@ class LinearSolve:
         Relative residual ||b - A x|| / ||b||.
     seconds : float
         Wall time of setup and solve (s).
+    setups : int
+        Preconditioner or factor builds this solve made: AMG hierarchies and
+        LU factorizations (0 when a kept one was reused).
+    negative_curvature : bool
+        CG met a direction p with ``p . A p <= 0`` (the matrix is not positive
+        definite) and stopped there; ``x`` is then its last iterate, a descent
+        direction of the quadratic model but not a solution.
     """
 
     x: np.ndarray
@@ -63,6 +71,8 @@ class LinearSolve:
     iterations: int
     residual: float
     seconds: float
+    setups: int = 0
+    negative_curvature: bool = False
 
 
 def _relative_residual(A, x, b) -> float:
@@ -140,10 +150,14 @@ class DirectSolver:
                 ) from None
             if A.shape[0] <= _CACHE_MAX_DOFS:
                 _FACTORS.put(A, lu)
+            setups = 1
+        else:
+            setups = 0
         x = lu.solve(b)
         if not np.all(np.isfinite(x)):
             raise SingularMatrix("the direct solve produced non-finite values: the matrix is singular.")
-        return LinearSolve(x, "direct", 0, _relative_residual(A, x, b), time.perf_counter() - t0)
+        return LinearSolve(x, "direct", 0, _relative_residual(A, x, b), time.perf_counter() - t0,
+                           setups=setups)
 
 
 @dataclass(frozen=True)
@@ -170,9 +184,11 @@ class AMGSolver:
         if not (0 < self.rtol < 1):
             raise InvalidParameter(f"AMGSolver rtol must be in (0, 1), got {self.rtol!r}.")
 
-    def solve(self, A, b, near_null=None, rtol=None) -> LinearSolve:
-        """Solve A x = b by AMG-preconditioned CG to ``rtol`` (default: the solver's own)."""
-        rtol = self.rtol if rtol is None else max(float(rtol), self.rtol)
+    def hierarchy(self, A, near_null=None):
+        """The smoothed-aggregation hierarchy of ``A`` (a pyamg ``MultilevelSolver``).
+
+        ``A`` is copied first: pyamg may edit the structure of the matrix it is given.
+        """
         try:
             import pyamg
         except ImportError:  # pragma: no cover - depends on the environment
@@ -180,8 +196,7 @@ class AMGSolver:
                 "AMGSolver needs pyamg: pip install 'fem_elastic[fast]' (or pip install pyamg), "
                 "or pass linear_solver=fe.DirectSolver()."
             ) from None
-        t0 = time.perf_counter()
-        A = sp.csr_matrix(A, copy=True)  # pyamg may edit A's structure; never the caller's
+        A = sp.csr_matrix(A, copy=True)
         B = None if near_null is None else np.ascontiguousarray(near_null, dtype=float)
         # The prolongation smoother's Jacobi weight needs a bound on the spectral
         # radius of D^-1 A. pyamg's default ("diagonal") and "block" weightings
@@ -190,7 +205,7 @@ class AMGSolver:
         # in 500 another, and "block" diverged on a thin P2 beam. "local" uses a
         # Gershgorin bound instead: deterministic, never too small, and it
         # converged on every system tried (45 iterations where the others took 30).
-        ml = pyamg.smoothed_aggregation_solver(
+        return pyamg.smoothed_aggregation_solver(
             A,
             B=B,
             symmetry="hermitian",
@@ -198,18 +213,214 @@ class AMGSolver:
             coarse_solver="splu",
             max_coarse=500,
         )
-        residuals: list[float] = []
-        x = ml.solve(b, tol=rtol, accel="cg", maxiter=self.maxiter, residuals=residuals)
+
+    def solve(self, A, b, near_null=None, rtol=None) -> LinearSolve:
+        """Solve A x = b by AMG-preconditioned CG to ``rtol`` (default: the solver's own)."""
+        rtol = self.rtol if rtol is None else max(float(rtol), self.rtol)
+        t0 = time.perf_counter()
+        A = sp.csr_matrix(A)
+        M = self.hierarchy(A, near_null).aspreconditioner(cycle="V")
+        x, its, ok, _ = preconditioned_cg(A, b, M, rtol, self.maxiter)
         rel = _relative_residual(A, x, b) if np.all(np.isfinite(x)) else np.inf
-        its = max(len(residuals) - 1, 0)
-        if not rel <= 10 * rtol:  # CG's own test is in the preconditioned norm: allow 10x
+        if not ok:
             raise LinearSolverFailed(
                 f"AMG-CG reached a relative residual of {rel:.2e} after {its} iterations "
                 f"(asked {rtol:.1e}): the matrix may be indefinite or badly conditioned. "
                 "Use linear_solver=fe.DirectSolver(), or raise maxiter.",
-                result=LinearSolve(x, "amg-cg", its, rel, time.perf_counter() - t0),
+                result=LinearSolve(x, "amg-cg", its, rel, time.perf_counter() - t0, setups=1),
             )
-        return LinearSolve(x, "amg-cg", its, rel, time.perf_counter() - t0)
+        return LinearSolve(x, "amg-cg", its, rel, time.perf_counter() - t0, setups=1)
+
+    def reusing(self, fallback: bool = False) -> "ReusedAMG":
+        """A :class:`ReusedAMG` that keeps one hierarchy across the solves of a Newton solve."""
+        return ReusedAMG(self, fallback=fallback)
+
+
+def preconditioned_cg(A, b, M, rtol, maxiter, x0=None, stop_at_negative_curvature=False):
+    """Preconditioned conjugate gradients for ``A x = b``, watching the curvature.
+
+    Stops when the true residual satisfies ``||b - A x|| <= rtol ||b||`` (the
+    2-norm, not the preconditioned one), after ``maxiter`` iterations, or,
+    with ``stop_at_negative_curvature``, at the first search direction with
+    ``p . A p <= 0``: ``A`` is then not positive definite (an exact tangent
+    under compression), and the iterate so far, which every earlier step
+    moved down the quadratic model ``x . A x / 2 - b . x`` (from ``x0 = 0``
+    it satisfies ``b . x > 0``), is returned as it is (Steihaug 1983; Nocedal
+    and Wright, Algorithm 7.1). Without the flag a non-positive curvature
+    also stops it (CG cannot go on), reported as not converged.
+
+    Parameters
+    ----------
+    A : sparse matrix or LinearOperator
+    b : numpy.ndarray
+    M : LinearOperator
+        Symmetric positive definite preconditioner (an AMG V-cycle).
+    rtol : float
+        Relative residual to reach.
+    maxiter : int
+        Most iterations.
+    x0 : numpy.ndarray, optional
+        Start (a warm start from an earlier, interrupted solve); default 0.
+
+    Returns
+    -------
+    x : numpy.ndarray
+    iterations : int
+    converged : bool
+    negative_curvature : bool
+    """
+    b = np.asarray(b, dtype=float)
+    nb = float(np.linalg.norm(b))
+    x = np.zeros_like(b) if x0 is None else np.array(x0, dtype=float)
+    if nb == 0.0:
+        return np.zeros_like(b), 0, True, False
+    r = b - A @ x if x0 is not None else b.copy()
+    target = rtol * nb
+    if float(np.linalg.norm(r)) <= target:
+        return x, 0, True, False
+    z = M @ r
+    p = z.copy()
+    rz = float(r @ z)
+    for k in range(maxiter):
+        Ap = A @ p
+        pAp = float(p @ Ap)
+        if not pAp > 0.0:
+            return x, k, False, True
+        a = rz / pAp
+        x += a * p
+        r -= a * Ap
+        if float(np.linalg.norm(r)) <= target:
+            return x, k + 1, True, False
+        z = M @ r
+        rz_new = float(r @ z)
+        p *= rz_new / rz
+        p += z
+        rz = rz_new
+    return x, maxiter, False, False
+
+
+class ReusedAMG:
+    """AMG-preconditioned CG that keeps one hierarchy across the solves of a Newton solve.
+
+    The tangent of an implicit step changes little between its Newton
+    iterations, so the smoothed-aggregation hierarchy (rigid-body near-null
+    space) of the first solve stays a good preconditioner for the later
+    ones: only its setup, not its quality, is saved. It is rebuilt, from the
+    matrix of the solve at hand, when CG on the kept hierarchy needs more
+    than ``rebuild_factor`` times the iterations the solve right after the
+    last setup would have taken for the same tolerance (its residual
+    reduction per iteration, measured then, extrapolated to the tolerance of
+    this solve: Newton's forcing term tightens from 1e-2 to 1e-8 over a
+    step, so a bare count would call every tight solve slow; at least
+    ``min_rebuild_iterations``; 1.5 and 10: a looser rule let a large-deflection
+    solve from rest keep the hierarchy of the undeformed beam and lose the
+    saving of the inexact forcing term), or fails: CG then
+    goes on from its last iterate with the new hierarchy (a warm start, so
+    no iteration is thrown away). A hierarchy is only ever built from a
+    positive (semi-)definite matrix (``psd=True``): on an exact, possibly
+    indefinite tangent CG stops at the first negative curvature or at that
+    limit and says so, and Newton answers by projecting.
+
+    Parameters
+    ----------
+    amg : AMGSolver
+        Tolerance, iteration limit and hierarchy settings.
+    fallback : bool
+        Solve a positive definite system directly (SuperLU) when CG fails even
+        on a fresh hierarchy (as :class:`AutoSolver` does); False raises
+        :class:`LinearSolverFailed`.
+    rebuild_factor, min_rebuild_iterations : float, int
+        The rebuild rule above.
+
+    Attributes
+    ----------
+    setups : int
+        Hierarchies built so far.
+    """
+
+    def __init__(self, amg: AMGSolver | None = None, fallback: bool = False,
+                 rebuild_factor: float = 1.5, min_rebuild_iterations: int = 10):
+        self.amg = amg if amg is not None else AMGSolver()
+        self.fallback = bool(fallback)
+        self.rebuild_factor = float(rebuild_factor)
+        self.min_rebuild_iterations = int(min_rebuild_iterations)
+        self.preconditioner = None
+        self.rate = None  # log10 of the residual reduction per CG iteration on a fresh hierarchy
+        self.setups = 0
+
+    def _measure(self, A, b, x, its, x0_used=False):
+        """Record the residual reduction per iteration of a solve on a fresh hierarchy."""
+        if its > 0 and not x0_used:
+            rel = max(_relative_residual(A, x, b), 1e-16)
+            self.rate = min(np.log10(rel) / its, -1e-3)  # < 0: keeps the extrapolation finite
+
+    def _setup(self, A, near_null):
+        self.preconditioner = self.amg.hierarchy(A, near_null).aspreconditioner(cycle="V")
+        self.setups += 1
+
+    def solve(self, A, b, near_null=None, rtol=None, psd=True, x0=None) -> LinearSolve:
+        """Solve ``A x = b`` by CG on the kept hierarchy (built here if there is none).
+
+        Parameters
+        ----------
+        psd : bool
+            ``A`` is positive semi-definite (a projected tangent). False (an
+            exact tangent): CG stops at the first negative curvature, or when
+            it would need a rebuild, and returns its iterate with
+            ``negative_curvature`` set instead of raising.
+        x0 : numpy.ndarray, optional
+            Warm start.
+        """
+        rtol = self.amg.rtol if rtol is None else max(float(rtol), self.amg.rtol)
+        t0 = time.perf_counter()
+        A = sp.csr_matrix(A)
+        setups0 = self.setups
+        if self.preconditioner is None:
+            self._setup(A, near_null)
+        fresh = self.setups > setups0
+        if fresh or self.rate is None or not psd:
+            # an exact tangent near a bifurcation is nearly singular: CG on it needs many more
+            # iterations than on the projection, and cutting it short would give up the
+            # exact Newton step (linear convergence; a thin P2 beam in compression then
+            # stalled its load steps); it stops at negative curvature instead
+            limit = self.amg.maxiter
+        else:
+            expected = np.log10(rtol) / self.rate  # iterations a fresh hierarchy would take
+            limit = min(self.amg.maxiter, max(self.min_rebuild_iterations,
+                                              int(np.ceil(self.rebuild_factor * expected))))
+        x, its, ok, neg = preconditioned_cg(A, b, self.preconditioner, rtol, limit, x0=x0,
+                                            stop_at_negative_curvature=not psd)
+        total = its
+        if fresh and ok:
+            self._measure(A, b, x, its)
+        if not ok and not psd:  # an indefinite (or hard) exact tangent: Newton projects
+            rel = _relative_residual(A, x, b)
+            return LinearSolve(x, "amg-cg", total, rel, time.perf_counter() - t0,
+                               setups=self.setups - setups0, negative_curvature=True)
+        if not ok and not fresh:  # the kept hierarchy no longer fits: rebuild, go on from x
+            log.debug("AMG-CG needed more than %d iterations on the kept hierarchy; rebuilding", limit)
+            self._setup(A, near_null)
+            x, its, ok, neg = preconditioned_cg(A, b, self.preconditioner, rtol, self.amg.maxiter,
+                                                x0=x if np.all(np.isfinite(x)) else None)
+            total += its
+            if ok:
+                self._measure(A, b, x, its, x0_used=True)
+        rel = _relative_residual(A, x, b) if np.all(np.isfinite(x)) else np.inf
+        setups = self.setups - setups0
+        if not ok:
+            self.preconditioner = None  # it failed on this matrix: build anew next time
+            msg = (f"AMG-CG reached a relative residual of {rel:.2e} after {total} iterations "
+                   f"(asked {rtol:.1e}): the matrix may be indefinite or badly conditioned.")
+            if self.fallback:
+                log.warning("%s Falling back to the direct solver.", msg)
+                d = DirectSolver().solve(A, b, near_null)
+                return replace(d, iterations=total, seconds=time.perf_counter() - t0,
+                               setups=setups + d.setups)
+            raise LinearSolverFailed(
+                msg + " Use linear_solver=fe.DirectSolver(), or raise maxiter.",
+                result=LinearSolve(x, "amg-cg", total, rel, time.perf_counter() - t0, setups=setups),
+            )
+        return LinearSolve(x, "amg-cg", total, rel, time.perf_counter() - t0, setups=setups)
 
 
 @dataclass(frozen=True)
@@ -254,6 +465,17 @@ class AutoSolver:
         better remedy for a stalled CG is the PSD projection, not a large LU.
         """
         return replace(self, fallback=False)
+
+    def reusing(self, ndofs: int):
+        """The solver a Newton solve of ``ndofs`` unknowns should use for all its solves.
+
+        Above ``max_direct_dofs`` (with pyamg) a :class:`ReusedAMG` that keeps
+        one hierarchy across them and falls back to the direct solver as
+        :meth:`solve` does; else this solver itself.
+        """
+        if ndofs > self.max_direct_dofs and _have_pyamg():
+            return self.amg.reusing(fallback=self.fallback)
+        return self
 
 
 def _have_pyamg() -> bool:

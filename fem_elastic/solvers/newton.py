@@ -24,6 +24,26 @@ falls to the round-off of Pi itself, where energy comparisons carry no
 information; the full Newton step is then taken (it is tiny, and Newton is
 in its quadratic regime there).
 
+Linear solves (issue 19). Above the direct solver's size (``AutoSolver``,
+or an ``AMGSolver``) one smoothed-aggregation hierarchy, built at the first
+solve of the call (one implicit step, or one load step), preconditions CG
+for every later tangent of the call (:class:`ReusedAMG`; it is rebuilt when
+CG on it needs more than twice the iterations of the solve right after the
+setup, or fails). Exact or projected is decided inside that CG, without a
+solve of its own: the exact tangent's CG stops at its first search direction
+``p`` with ``p . H p <= 0``. That curvature is the exact cheap indicator of
+indefiniteness along the Krylov space the solve explores (a Lanczos-type
+test; the sign of ``dx . H dx`` of a finished solve would cost the solve
+first), and every CG iterate before it is a descent direction. Newton then
+assembles the projected tangent and continues CG from that iterate (a warm
+start; the iterations are kept, and counted). "Start projected when the
+previous step needed it" was not chosen: it would give up Newton's quadratic
+convergence on every step after one indefinite tangent, where the curvature
+test costs nothing when the exact tangent is positive definite. A solver
+that cannot stop at negative curvature (a direct one, a user's) keeps the
+solve-then-test of the exact tangent; that solve is counted in
+``linear_solves``.
+
 The tolerance is relative to the problem's force scale: the larger of the
 caller's ``g_scale`` (a load, an inertial force), the out-of-balance force of
 the start and the force the held DOFs carry there (the reaction of the
@@ -47,7 +67,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from .linear_solvers import AutoSolver, LinearSolverFailed, SingularMatrix
+from .linear_solvers import AMGSolver, AutoSolver, LinearSolverFailed, ReusedAMG, SingularMatrix
 
 __all__ = ["NewtonResult", "newton_minimize"]
 
@@ -85,6 +105,11 @@ class NewtonResult:
         Why it stopped.
     seconds : dict
         Wall time (s) spent in ``"linearize"``, ``"solve"`` and ``"line_search"``.
+    linear_solves : int
+        Linear solves, every one (an exact-tangent CG stopped at negative
+        curvature included: its iterate seeds the projected solve).
+    linear_setups : int
+        Preconditioner hierarchies (AMG) and LU factorizations built.
     """
 
     x: np.ndarray
@@ -95,6 +120,14 @@ class NewtonResult:
     linear_iterations: int = 0
     message: str = ""
     seconds: dict = field(default_factory=lambda: {"linearize": 0.0, "solve": 0.0, "line_search": 0.0})
+    linear_solves: int = 0
+    linear_setups: int = 0
+
+
+#: Private switch for benchmarks (scripts/bench_newton_amg.py): False restores the behaviour
+#: before issue 19 (a new AMG hierarchy for every solve, and an exact-tangent solve that is
+#: thrown away when its direction is no descent direction).
+_REUSE_AMG = True
 
 
 def constrain(H: sp.csr_matrix, free: np.ndarray, pattern=None) -> sp.csr_matrix:
@@ -215,6 +248,10 @@ def newton_minimize(
     NewtonResult
     """
     solver = linear_solver if linear_solver is not None else AutoSolver()
+    if _REUSE_AMG and isinstance(solver, AutoSolver):  # one AMG hierarchy for the whole solve
+        solver = solver.reusing(len(free))
+    elif _REUSE_AMG and isinstance(solver, AMGSolver):
+        solver = solver.reusing()
     x = np.array(x0, dtype=float)
     free = np.asarray(free, dtype=bool)
     if near_null is not None:
@@ -254,23 +291,23 @@ def newton_minimize(
         if it == max_iter:
             result.message = f"no convergence in {max_iter} iterations (||g|| = {gnorm:.3e} N)"
             break
-        # on an exact tangent, a stalled CG is answered by projecting, not by a big LU
-        strict = solver.strict() if exact and project and hasattr(solver, "strict") else solver
         eta = min(1e-2, 0.1 * gnorm / result.residual_history[0]) if inexact else None
-        try:
-            dx, slope = _direction(strict, H, g, free, pattern, near_null, result, eta)
-        except LinearSolverFailed:
-            if not (exact and project):
-                raise
-            dx, slope = np.zeros_like(g), 0.0  # an indefinite exact Hessian stalls CG
-        if exact and project and not slope < 0:
-            # the exact Hessian is indefinite here: go back to the projection
-            log.debug("exact Hessian gave no descent direction; projecting")
-            exact = False
-            t0 = time.perf_counter()
-            _, H = linearize(x, True)
-            result.seconds["linearize"] += time.perf_counter() - t0
-            dx, slope = _direction(solver, H, g, free, pattern, near_null, result, eta)
+        if isinstance(solver, ReusedAMG):
+            # CG on the exact tangent stops at its first negative curvature (the tangent is
+            # indefinite); its iterate so far is the warm start of the projected tangent's CG
+            dx, slope, indefinite = _direction(solver, H, g, free, pattern, near_null, result, eta,
+                                               psd=not (exact and project))
+            if indefinite:
+                log.debug("negative curvature in CG on the exact Hessian; projecting")
+                exact = False
+                t0 = time.perf_counter()
+                _, H = linearize(x, True)
+                result.seconds["linearize"] += time.perf_counter() - t0
+                dx, slope, _ = _direction(solver, H, g, free, pattern, near_null, result, eta,
+                                          psd=True, x0=dx)
+        else:
+            dx, slope, H, exact = _direction_trial(
+                solver, linearize, x, H, g, free, pattern, near_null, result, eta, exact, project)
         if not slope < 0:  # still no descent direction: steepest descent
             log.debug("Newton direction is not a descent direction; using -g")
             # keep the Newton step's length; without one, a step of -g / max diag(H)
@@ -325,20 +362,66 @@ def newton_minimize(
     return result
 
 
-def _direction(solver, H, g, free, pattern, near_null, result, rtol=None):
-    """Solve H dx = -g on the free DOFs (to ``rtol`` if the solver is iterative);
-    returns dx and the slope g . dx."""
+def _direction(solver, H, g, free, pattern, near_null, result, rtol=None, psd=None, x0=None):
+    """Solve H dx = -g on the free DOFs (to ``rtol`` if the solver is iterative).
+
+    Counts the solve, its iterations and its setups in ``result``. With a
+    :class:`ReusedAMG` solver (``psd`` given) returns dx, the slope g . dx and
+    whether CG met negative curvature (``psd=False``: the exact tangent is
+    indefinite, dx is then CG's iterate so far); else dx and the slope.
+    ``x0`` is a warm start for CG.
+    """
     t0 = time.perf_counter()
     A = constrain(H, free, pattern)
     kw = {"rtol": rtol} if rtol is not None and _takes_rtol(solver) else {}
+    if isinstance(solver, ReusedAMG):
+        kw.update(psd=True if psd is None else psd, x0=x0)
     try:
         lin = solver.solve(A, -g, near_null, **kw)
     except SingularMatrix:
         # A PSD projection can leave a direction with no stiffness at all;
         # a small diagonal shift restores a descent direction.
         shift = 1e-8 * float(np.abs(A.diagonal()).max())
+        result.linear_solves += 1  # the failed factorization is a solve too
         lin = solver.solve(A + shift * sp.identity(A.shape[0], format="csr"), -g, near_null, **kw)
+    except LinearSolverFailed as exc:
+        result.linear_solves += 1
+        last = getattr(exc, "result", None)
+        if last is not None:
+            result.linear_iterations += last.iterations
+            result.linear_setups += last.setups
+        result.seconds["solve"] += time.perf_counter() - t0
+        raise
     result.seconds["solve"] += time.perf_counter() - t0
+    result.linear_solves += 1
     result.linear_iterations += lin.iterations
+    result.linear_setups += getattr(lin, "setups", 0)
     dx = np.where(free, lin.x, 0.0)
+    if psd is not None:
+        return dx, float(g @ dx), bool(getattr(lin, "negative_curvature", False))
     return dx, float(g @ dx)
+
+
+def _direction_trial(solver, linearize, x, H, g, free, pattern, near_null, result, eta, exact,
+                     project):
+    """The direction with a solver that cannot stop CG at negative curvature (a direct one,
+    a user's, or any with ``_REUSE_AMG`` off): on an exact tangent it is solved first, and
+    when its direction is no descent direction the projected tangent is assembled and solved
+    too (the first solve is then wasted, but counted). Returns dx, slope, H, exact."""
+    # on an exact tangent, a stalled CG is answered by projecting, not by a big LU
+    strict = solver.strict() if exact and project and hasattr(solver, "strict") else solver
+    try:
+        dx, slope = _direction(strict, H, g, free, pattern, near_null, result, eta)
+    except LinearSolverFailed:
+        if not (exact and project):
+            raise
+        dx, slope = np.zeros_like(g), 0.0  # an indefinite exact Hessian stalls CG
+    if exact and project and not slope < 0:
+        # the exact Hessian is indefinite here: go back to the projection
+        log.debug("exact Hessian gave no descent direction; projecting")
+        exact = False
+        t0 = time.perf_counter()
+        _, H = linearize(x, True)
+        result.seconds["linearize"] += time.perf_counter() - t0
+        dx, slope = _direction(solver, H, g, free, pattern, near_null, result, eta)
+    return dx, slope, H, exact

@@ -85,6 +85,12 @@ class StepStats:
         Residual (force) evaluations of the model.
     newton_iterations, line_search_cuts, linear_iterations : int
         Solver work of implicit schemes (0 for explicit ones).
+    linear_solves : int
+        Linear solves of implicit schemes, every one (none is thrown away).
+    linear_setups : int
+        AMG hierarchies and LU factorizations built for them (with the
+        default solver above 20k DOFs, one hierarchy per step unless CG
+        needed a rebuild).
     dt_cuts : int
         Times the step was retried smaller: halved because Newton did not
         converge (implicit schemes), or with more sub-steps (explicit
@@ -107,10 +113,13 @@ class StepStats:
     substeps: int = 1
     cuts: list = field(default_factory=list)
     seconds: dict = field(default_factory=lambda: {"linearize": 0.0, "solve": 0.0, "line_search": 0.0})
+    linear_solves: int = 0
+    linear_setups: int = 0
 
     def add(self, other: "StepStats") -> None:
         """Accumulate another step's counts into this one."""
-        for name in ("gradient_evaluations", "newton_iterations", "line_search_cuts", "linear_iterations"):
+        for name in ("gradient_evaluations", "newton_iterations", "line_search_cuts", "linear_iterations",
+                     "linear_solves", "linear_setups"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         for k, v in other.seconds.items():
             self.seconds[k] = self.seconds.get(k, 0.0) + v

@@ -213,7 +213,9 @@ class ImplicitEuler(_Implicit):
         lag = getattr(contact, "lag_friction", None) if getattr(contact, "mu", 0.0) > 0 else None
         rounds = contact.spec.friction_iterations if lag is not None else 1
         if contact is not None and hasattr(contact, "begin_solve"):
-            contact.begin_solve(G.gradient)  # IPC's kappa balances against the whole G
+            # IPC's kappa balances against the whole G; it is updated here, between steps,
+            # from the minimum distance at the step's start
+            contact.begin_solve(G.gradient, x=state.x)
         try:
             for r in range(rounds):
                 if lag is not None:  # the first round lags at the start of the step
@@ -230,6 +232,8 @@ class ImplicitEuler(_Implicit):
                 stats.gradient_evaluations += counted.calls
                 stats.line_search_cuts += res.line_search_cuts
                 stats.linear_iterations += res.linear_iterations
+                stats.linear_solves += res.linear_solves
+                stats.linear_setups += res.linear_setups
                 for k, v in res.seconds.items():
                     stats.seconds[k] = stats.seconds.get(k, 0.0) + v
                 if not res.converged:
@@ -318,6 +322,8 @@ class LinearizedImplicitEuler(_Implicit):
                            model.rigid_body_modes * free[:, None], solve)
         stats.seconds["solve"] += solve.seconds["solve"]
         stats.linear_iterations += solve.linear_iterations
+        stats.linear_solves += solve.linear_solves
+        stats.linear_setups += solve.linear_setups
         stats.newton_iterations += 1
         x1 = x0 + dx
         if not np.all(np.isfinite(x1)):
