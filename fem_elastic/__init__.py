@@ -113,7 +113,7 @@ from .materials import energy_math as math  # noqa: F401  (fe.math; not in __all
 from .physics.body import Body
 from .physics.multibody import MultiBody
 from .physics.broad_phase import BoundingSpheres
-from .physics.impulse_contact import BoundImpulseContact, ImpulseContact, collide_particles
+from .physics.impulse_contact import BoundImpulseContact, ImpulseContact, RestContactWarning, collide_particles
 from .physics import (
     BoundIPCContact,
     CollisionSurface,
@@ -195,7 +195,7 @@ __all__ = [
     "PBD", "XPBD", "ConstraintNeoHookean",
     "CollisionSurface", "collision_surface", "IPCContact", "BoundIPCContact",
     "Body", "MultiBody",
-    "ImpulseContact", "BoundImpulseContact", "collide_particles", "BoundingSpheres",
+    "ImpulseContact", "BoundImpulseContact", "RestContactWarning", "collide_particles", "BoundingSpheres",
 ]
 
 _compat.install()

@@ -8,6 +8,7 @@ from fem_elastic.physics.broad_phase import BoundingSpheres, sphere_pairs, trian
 from fem_elastic.physics.collision_surface import CollisionSurface, _edges_of
 from fem_elastic.physics.impulse_contact import (
     BoundImpulseContact,
+    RestContactWarning,
     ImpulseContact,
     closest_point_triangle,
     collide_particles,
@@ -356,3 +357,92 @@ def test_run_summary_reports_the_average_contact_force_of_the_impulses():
     mass_each = 1000.0 * 0.1 ** 3
     floor = mass_each * 1.5 * 1.0 / (summary["contact_steps_in_contact"] * dt)
     assert summary["contact_force_max"] >= floor
+
+
+def _cubes_apart(gap, contact, va=(1.0, 0.0, 0.0), vb=(-1.0, 0.0, 0.0), shift=(0.0, 0.0), mb=1000.0):
+    cube = fe.beam_mesh(length=0.1, width=0.1, height=0.1, cells=(2, 2, 2))
+    material = fe.ElasticBody(fe.NeoHookean(E=1e5, nu=0.3))
+    bodies = [fe.Body(cube, 1000.0, material, name="a", velocity=va),
+              fe.Body(cube, mb, material, name="b", translate=(0.1 + gap, *shift), velocity=vb)]
+    return fe.MultiBody(bodies, contact=contact)
+
+
+def test_bodies_placed_within_the_thickness_still_collide_and_are_warned_about():
+    # 0.5 mm apart with a 2 mm thickness: the pairs between the two bodies are kept (only pairs
+    # of one body are left out at rest), with a warning naming the fix
+    with pytest.warns(RestContactWarning, match="move the bodies apart by more than the thickness"):
+        model = _cubes_apart(5e-4, fe.ImpulseContact(thickness=2e-3))
+    assert model.contact._excluded.size == 0
+    state = fe.State(model.X.copy(), model.initial_velocity(), 0.0)
+    p0 = model.linear_momentum(state.v)
+    for _ in range(60):  # 6 ms at 1 m/s each: 12 mm of approach without the contact
+        state = fe.SymplecticEuler().step(model, state, 1e-4)
+    assert not model.contact.has_intersections(state.x)
+    V = state.v.reshape(-1, 3)
+    half = V.shape[0] // 2
+    assert V[:half, 0].mean() < 0.5 and V[half:, 0].mean() > -0.5  # slowed by the contact
+    assert np.abs(model.linear_momentum(state.v) - p0).max() <= 1e-13 * 2.0  # 2 kg m/s of |p|
+
+
+def test_bodies_farther_than_the_thickness_give_no_warning():
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RestContactWarning)
+        model = _cubes_apart(3e-3, fe.ImpulseContact(thickness=2e-3))
+    assert model.contact._excluded.size == 0
+
+
+def _kinetic(m, v):
+    return 0.5 * float(m @ (v * v))
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.5])
+@pytest.mark.parametrize("e", [0.0, 0.5, 1.0])
+def test_coupled_contacts_never_create_kinetic_energy(e, mu):
+    # an oblique collision of two cubes of unequal density, 0.5 mm into each other's thickness:
+    # eight coupled vertex-triangle contacts solved together (Poisson restitution)
+    with pytest.warns(RestContactWarning):
+        model = _cubes_apart(5e-4, fe.ImpulseContact(restitution=e, friction=mu, thickness=2e-3),
+                             va=(2.0, 0.5, 0.0), vb=(-1.0, 0.0, 0.3), shift=(0.03, 0.01), mb=500.0)
+    x, v, m = model.X.copy(), model.initial_velocity(), model.lumped_mass
+    x1, v1 = model.respond_contacts(x, v)
+    assert model.contact.last_contacts == 8
+    ke0, ke1 = _kinetic(m, v), _kinetic(m, v1)
+    # never more: round-off of the ~160-term sums of the kinetic energy, ~1e-15 relative
+    assert ke1 <= ke0 * (1.0 + 1e-14)
+    p0, p1 = (m * v).reshape(-1, 3).sum(0), (m * v1).reshape(-1, 3).sum(0)
+    assert np.abs(p1 - p0).max() <= ROUNDOFF * float(m @ np.abs(v))
+    if e == 1.0 and mu == 0.0:
+        # frictionless elastic: the energy is kept up to the Jacobi rounds' residual at their
+        # default count (50 rounds: 4e-5 of it measured; the exact inelastic solution keeps all)
+        assert ke1 >= ke0 * (1.0 - 2e-4)
+    if e == 0.0:  # what the inelastic phase alone takes is the most any e can take
+        assert ke1 < ke0
+
+
+def test_contact_force_is_the_average_over_all_sub_steps_of_a_step():
+    # dt = 5 ms above the critical ~2.8 ms: SymplecticEuler(substep=True) takes it in sub-steps,
+    # each with its own response; 0.5 m/s each way moves 2.2 mm per sub-step, under the thickness
+    model, n, _ = _two_cubes(fe.ImpulseContact(restitution=0.5, thickness=3e-3), offset=(0.105, 0.0, 0.0))
+    contact = model.contact
+    impulses = []
+    respond = contact.respond
+
+    def counting(x, v, mass):
+        out = respond(x, v, mass)
+        impulses.append(contact.last_impulse)
+        return out
+
+    contact.respond = counting
+    v0 = np.zeros((2 * n, 3))
+    v0[:n, 0], v0[n:, 0] = 0.5, -0.5
+    dt, steps = 5e-3, 6
+    traj = fe.simulate(model, fe.SymplecticEuler(substep=True), dt, steps=steps,
+                       state=fe.State(model.X.copy(), v0.ravel(), 0.0))
+    assert len(impulses) > steps  # sub-stepped: several responses per step
+    force = np.asarray(traj.step_stats["contact_force"])
+    total = sum(impulses)
+    assert total > 0.0
+    # every response's impulse counted once, in its step: a sum of the same terms, regrouped
+    assert float(force.sum()) * dt == pytest.approx(total, rel=1e-12)

@@ -54,6 +54,9 @@ class ContactWatch(Observer):
     def on_start(self, run) -> None:
         for k, v in contact_stats(run.n_steps).items():
             run.stats.setdefault(k, v)
+        reset = getattr(run.model.contact, "reset_impulse", None)
+        if callable(reset):  # impulses of responses before the run are not the first step's
+            reset()
 
     def on_step(self, run, event) -> None:
         d = run.model.contact.diagnostics(event.after.x)
@@ -62,7 +65,8 @@ class ContactWatch(Observer):
         run.stats["contact_active"][k] = float(d.get("active_contacts", 0))
         force = float(d.get("contact_force", 0.0))
         if math.isnan(force) and "contact_impulse" in d:
-            # an impulse contact acts in no time: its average force over the step is J / h
+            # an impulse contact acts in no time: ``contact_impulse`` sums its responses since the
+            # last read (every sub-step of this step), so J / h is its average force over the step
             force = float(d["contact_impulse"]) / run.dt
         run.stats["contact_force"][k] = force
 

@@ -22,13 +22,16 @@ surface's ``vertex_dofs`` (a sparse index map; P2 edge nodes take no part).
 
 Adaptive barrier stiffness (``kappa="auto"``): IPC's rule (ipctk's
 ``initial_barrier_stiffness`` / ``update_barrier_stiffness``). At binding
-kappa is the smallest stiffness ipctk admits for the mean surface-vertex
-mass and the scene's bounding-box diagonal; the first linearization with
-active contacts sets it to balance the barrier's gradient against the rest
-of the model's force (clamped to ``[kappa_min, 100 kappa_min]``); each
-later linearization doubles it while the minimum distance keeps shrinking
-below ``1e-9`` of the diagonal. Kappa is state: it is not stored in
-checkpoints, so a resumed run starts from the bound value again.
+kappa is the smallest stiffness ipctk admits for the mean nodal mass and the
+scene's bounding-box diagonal; the first linearization with active contacts
+(once per bound contact) sets it to balance the barrier's gradient against
+the rest of the objective (clamped to ``[kappa_min, 100 kappa_min]``); after
+that it changes only between solves (:meth:`BoundIPCContact.begin_solve`,
+called by implicit Euler at each step with the step's start), doubling while
+the minimum distance keeps shrinking below ``1e-9`` of the diagonal, so the
+objective a Newton solve minimises does not change under it. Kappa is state:
+it is not stored in checkpoints, so a resumed run starts from the bound value
+again.
 
 Friction (``friction = mu > 0``): lagged IPC friction. An implicit step calls
 :meth:`BoundIPCContact.lag_friction` with the step's start ``x_n``, the
@@ -187,7 +190,9 @@ class BoundIPCContact(Potential):
             body = np.asarray(surface.body)
             if np.unique(body).size < 2:
                 log.info("IPC contact without self-contact on a single body: no pair can collide")
-            self.mesh.can_collide = lambda i, j: bool(body[i] != body[j])
+            # ipctk's native filter: a Python callable here is called from the parallel
+            # broad phase (ipctk warns it is unsafe; it deadlocked in 4 of 6 runs)
+            self.mesh.can_collide = ipctk.make_vertex_patches_filter(body.astype(np.int32))
         self._broad_phase = getattr(ipctk, _BROAD_PHASES[spec.broad_phase])()
         # Additive CCD (Li et al. 2021): conservative by construction (it advances by lower
         # bounds of the distance and stops at 0.9 of the remaining gap); measured 30-100x faster
@@ -201,8 +206,10 @@ class BoundIPCContact(Potential):
                 "bodies at t = 0): IPC contact keeps bodies apart but cannot separate them. Move "
                 "the bodies apart (or the pieces of the mesh) so that no surfaces cross."
             )
-        vertex_mass = np.asarray(model.lumped_mass)[surface.vertex_dofs[:, 0]]
-        self.average_mass = float(vertex_mass.mean())
+        # IPC's average nodal mass (kg): of all the model's nodes, as in Li et al. 2020, not of
+        # the surface vertices alone (each carries only part of an element's mass, so that mean
+        # is lower: 2/3 of it, and so of kappa_min, on scripts/bench_ipc.py's cubes at 2592 tets)
+        self.average_mass = float(np.asarray(model.lumped_mass).reshape(-1, 3).mean())
         self.adaptive = spec.kappa == "auto"
         if self.adaptive:
             kappa_min, _ = ipctk.initial_barrier_stiffness(
@@ -308,20 +315,52 @@ class BoundIPCContact(Potential):
         return self._scatter_matrix(H)
 
     def linearize(self, x: np.ndarray, project: bool = False):
-        """Gradient and PSD-projected Hessian, whatever ``project`` says (as in IPC's Newton).
+        """Gradient and Hessian, PSD-projected per pair with ``project`` (as in IPC's Newton).
 
-        The barrier's exact Hessian is indefinite for most pairs (the distance
-        is not convex in the positions), and Newton's switch to the exact
-        tangent near a solution then gives steps the CCD cuts to nothing; the
-        projected one is always a descent direction. ``hessian(x, False)``
-        stays exact. With ``kappa="auto"`` the stiffness adapts here first
-        (see the module notes).
+        The barrier's exact Hessian is indefinite for many pairs (the distance
+        is not convex in the positions), so far from a solution Newton needs
+        the projected one, which is always a descent direction. Near the
+        solution, where Newton asks for the exact tangent (``project=False``
+        after a full step, see :mod:`fem_elastic.solvers.newton`), the exact
+        one restores quadratic convergence; the clamped one converges only
+        linearly there (a factor of about 0.3 per iteration measured on the
+        two-cube drop of scripts/bench_ipc.py at 2592 tets: 27 Newton
+        iterations in its first step against 13 with the exact tangent). Newton returns to the projection as soon as the exact
+        direction is not a descent direction or is cut by the CCD or the line
+        search. With ``kappa="auto"`` the stiffness is set here at the first
+        linearization with active contacts (see the module notes); it does not
+        change inside a solve.
         """
-        if self.adaptive:
-            self._adapt(x)
-        return self.gradient(x), self.hessian(x, project=True)
+        if self.adaptive and not self._kappa_initialized:
+            self._init_kappa(x)
+        return self.gradient(x), self.hessian(x, project=project)
 
-    def _adapt(self, x):
+    def _init_kappa(self, x):
+        """IPC's initial stiffness: balance the barrier's gradient against the rest of the objective."""
+        ipctk = _ipctk()
+        V = self._V(x)
+        c = self._collisions_at(V)
+        if c.empty():
+            return
+        if self._objective_gradient is not None:  # the whole objective but the barrier
+            g_rest = self._objective_gradient(x) - self.gradient(x)
+        else:
+            g_rest = np.zeros(self.ndofs)
+            for term in self._model_terms():
+                g_rest += term.gradient(x)
+        unit = ipctk.BarrierPotential(self.dhat, 1.0)
+        g_barrier = unit.gradient(c, self.mesh, V)
+        kappa, kmax = ipctk.initial_barrier_stiffness(
+            self.bbox_diagonal, ipctk.ClampedLogBarrier(), self.dhat, self.average_mass,
+            np.ascontiguousarray(g_rest[self._idx]), g_barrier,
+        )
+        self.kappa_max = float(kmax)
+        self._set_kappa(kappa)
+        self._kappa_initialized = True
+        self._prev_min_distance = float(c.compute_minimum_distance(self.mesh, V))  # squared
+
+    def _update_kappa(self, x):
+        """IPC's update between two solves: double kappa while the minimum distance shrinks below 1e-9 diag."""
         ipctk = _ipctk()
         V = self._V(x)
         c = self._collisions_at(V)
@@ -329,30 +368,23 @@ class BoundIPCContact(Potential):
             self._prev_min_distance = math.inf
             return
         dmin = float(c.compute_minimum_distance(self.mesh, V))  # squared, as ipctk's update takes it
-        if not self._kappa_initialized:
-            if self._objective_gradient is not None:  # the whole objective but the barrier
-                g_rest = self._objective_gradient(x) - self.gradient(x)
-            else:
-                g_rest = np.zeros(self.ndofs)
-                for term in self._model_terms():
-                    g_rest += term.gradient(x)
-            unit = _ipctk().BarrierPotential(self.dhat, 1.0)
-            g_barrier = unit.gradient(c, self.mesh, V)
-            kappa, kmax = ipctk.initial_barrier_stiffness(
-                self.bbox_diagonal, ipctk.ClampedLogBarrier(), self.dhat, self.average_mass,
-                np.ascontiguousarray(g_rest[self._idx]), g_barrier,
-            )
-            self.kappa_max = float(kmax)
-            self._set_kappa(kappa)
-            self._kappa_initialized = True
-        elif math.isfinite(self._prev_min_distance):
+        if math.isfinite(self._prev_min_distance):
             self._set_kappa(ipctk.update_barrier_stiffness(
                 self._prev_min_distance, dmin, self.kappa_max, self.kappa, self.bbox_diagonal,
             ))
         self._prev_min_distance = dmin
 
-    def begin_solve(self, objective_gradient=None) -> None:
-        """Start a minimisation (an implicit step, a load step): kappa is set again at its first contact.
+    def begin_solve(self, objective_gradient=None, x=None) -> None:
+        """Start a minimisation (an implicit step, a load step).
+
+        With ``kappa="auto"``, kappa is set once, at the first linearization
+        with active contacts (the first solve that meets a contact), and
+        afterwards updated only here, between solves (IPC's rule, ipctk's
+        ``update_barrier_stiffness``): doubled, up to ``kappa_max``, while
+        the minimum distance at the start of the solve keeps shrinking below
+        ``1e-9`` of the bounding-box diagonal. A stiffness that changes inside
+        a Newton solve changes the objective under the line search and the
+        convergence test.
 
         Parameters
         ----------
@@ -361,11 +393,14 @@ class BoundIPCContact(Potential):
             incremental potential: inertia included); the initial stiffness
             balances the barrier's gradient against it, less the barrier's own.
             Without it, the rest of the model's potentials are used.
+        x : numpy.ndarray, optional
+            Positions at the start of the solve (m), ``(ndofs,)``, where the
+            minimum distance for the update is measured; without it kappa is
+            not updated.
         """
         self._objective_gradient = objective_gradient
-        if self.adaptive:
-            self._kappa_initialized = False
-            self._prev_min_distance = math.inf
+        if self.adaptive and self._kappa_initialized and x is not None:
+            self._update_kappa(x)
 
     # CCD -------------------------------------------------------------------------------------
     def max_step(self, x: np.ndarray, dx: np.ndarray) -> float:
