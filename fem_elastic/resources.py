@@ -5,9 +5,15 @@ estimate and what is free, instead of swapping for minutes and being killed.
 The estimates here are made from counts alone (tets, vertices, element order,
 solver), before any array is allocated:
 
-- :func:`model_memory` — what building a model and assembling its tangent
-  take (bytes per tet, measured: see :data:`BYTES_PER_TET`) plus the linear
-  solver's share (a sparse LU's fill, or an AMG hierarchy);
+- :func:`model_memory` — what building a model takes (bytes per tet,
+  measured: see :data:`MODEL_BYTES_PER_TET`), and with ``tangent=True`` what
+  assembling its tangent takes too (:data:`BYTES_PER_TET`) plus the linear
+  solver's share (a sparse LU's fill, or an AMG hierarchy). ``fe.Model``
+  checks the first when it is built, ``Model.check_tangent_memory`` the
+  others: the tangent alone at the first ``Model.linearize`` (an explicit
+  run's critical time step), with the solver's share before a static solve,
+  an implicit run or a modal analysis; so explicit runs are not refused for
+  a solver they never use;
 - :func:`available_memory`, :func:`free_disk` — what the machine has free
   (``MemAvailable`` of ``/proc/meminfo``, else ``os.sysconf``; ``shutil.disk_usage``),
   overridden by the environment variables ``FEM_ELASTIC_MEMORY_LIMIT`` and
@@ -33,7 +39,7 @@ from pathlib import Path
 
 from .errors import InvalidParameter, ResourceLimit
 
-__all__ = ["BYTES_PER_TET", "available_memory", "free_disk", "model_memory", "check_memory",
+__all__ = ["BYTES_PER_TET", "MODEL_BYTES_PER_TET", "available_memory", "free_disk", "model_memory", "check_memory",
            "check_disk", "check_input_file", "format_bytes", "MEMORY_ENV", "DISK_ENV"]
 
 MEMORY_ENV = "FEM_ELASTIC_MEMORY_LIMIT"
@@ -43,6 +49,10 @@ DISK_ENV = "FEM_ELASTIC_DISK_LIMIT"
 #: scatter map, quadrature tensors), by element order: measured with tracemalloc on beam
 #: meshes of 1920 and 8640 tets (P1: 6.3-6.4 kB; P2: 29.2-29.5 kB per tet), rounded up.
 BYTES_PER_TET = {1: 7_000, 2: 32_000}
+#: Peak bytes per tet of building a Model alone (mesh, space, mass, per-element data, one
+#: gradient; no tangent): measured with tracemalloc on beam meshes of 8640 and 15360 P1 tets
+#: (1.81 kB per tet) and of 540 and 1920 P2 tets (10.7 kB per tet), rounded up.
+MODEL_BYTES_PER_TET = {1: 2_500, 2: 12_000}
 #: Nonzeros of the assembled stiffness per tet (measured on the same meshes: P1 26-29, P2 384-400).
 NNZ_PER_TET = {1: 30, 2: 400}
 #: The automatic solver's largest direct solve (``fem_elastic.solvers.linear_solvers.AutoSolver``).
@@ -106,7 +116,8 @@ def free_disk(path) -> int | None:
         return None
 
 
-def model_memory(n_tets: int, n_vertices: int, order: int = 1, solver: str = "auto") -> dict:
+def model_memory(n_tets: int, n_vertices: int, order: int = 1, solver: str = "auto",
+                 tangent: bool = True) -> dict:
     """Estimated peak memory of a model and its linear solves (bytes), by part.
 
     Parameters
@@ -120,11 +131,16 @@ def model_memory(n_tets: int, n_vertices: int, order: int = 1, solver: str = "au
         SuperLU's fill on beams: 0.34-1.0 x that); ``"iterative"``: AMG-CG, about three copies
         of the matrix; ``"auto"``: direct up to 20 000 DOFs, iterative above (as
         ``AutoSolver``); ``"none"``: explicit schemes, no matrix solve.
+    tangent : bool
+        True: the model with its assembled tangent (:data:`BYTES_PER_TET`) and the
+        ``solver``'s share; False: the model's own share alone (:data:`MODEL_BYTES_PER_TET`:
+        mesh, space, mass, per-element data), no matrix and no solver.
 
     Returns
     -------
     dict
-        ``"model"``, ``"solver"`` and ``"total"`` (bytes), ``"ndof"``.
+        ``"model"``, ``"solver"`` and ``"total"`` (bytes), ``"ndof"``, ``"solver_kind"``,
+        ``"order"`` and ``"tangent"``.
 
     Examples
     --------
@@ -137,7 +153,9 @@ def model_memory(n_tets: int, n_vertices: int, order: int = 1, solver: str = "au
     n_nodes = n_vertices if order == 1 else 2 * n_vertices + n_tets  # edges ~ vertices + tets (Euler)
     ndof = 3 * n_nodes
     nnz = NNZ_PER_TET[order] * n_tets
-    model = BYTES_PER_TET[order] * n_tets
+    model = (BYTES_PER_TET if tangent else MODEL_BYTES_PER_TET)[order] * n_tets
+    if not tangent:
+        solver = "none"
     if solver == "auto":
         solver = "direct" if ndof <= MAX_DIRECT_DOFS else "iterative"
     if solver == "direct":
@@ -147,7 +165,7 @@ def model_memory(n_tets: int, n_vertices: int, order: int = 1, solver: str = "au
     else:
         solve = 0
     return {"model": float(model), "solver": float(solve), "total": float(model + solve), "ndof": ndof,
-            "solver_kind": solver}
+            "solver_kind": solver, "order": order, "tangent": bool(tangent)}
 
 
 def check_memory(estimate: dict, what: str = "the model") -> None:
@@ -165,12 +183,21 @@ def check_memory(estimate: dict, what: str = "the model") -> None:
     if free is None or need <= free:
         return
     source = f"${MEMORY_ENV}" if os.environ.get(MEMORY_ENV, "").strip() else "MemAvailable"
+    tangent = estimate.get("tangent", True)
+    if tangent:
+        parts = (f"{format_bytes(estimate['model'])} for the model and its tangent, "
+                 f"{format_bytes(estimate['solver'])} for the {estimate['solver_kind']} linear solver")
+    else:
+        parts = f"{format_bytes(estimate['model'])} for the model, no matrix"
+    advice = ["a coarser mesh"]  # only what applies: order=1 for quadratic tets, no matrix for one
+    if estimate.get("order", 1) == 2:
+        advice.append("order=1")
+    if tangent:
+        advice.append("an explicit integrator such as fe.SymplecticEuler (no matrix) for dynamics")
     raise ResourceLimit(
-        f"{what} would need about {format_bytes(need)} of memory ({estimate['ndof']} DOFs: "
-        f"{format_bytes(estimate['model'])} for the model and its tangent, {format_bytes(estimate['solver'])} "
-        f"for the {estimate['solver_kind']} linear solver), but only {format_bytes(free)} is free ({source}). "
-        "Use a coarser mesh, order=1, an explicit integrator (no matrix), or a machine with more "
-        f"memory; set {MEMORY_ENV} to a larger figure to try all the same.",
+        f"{what} would need about {format_bytes(need)} of memory ({estimate['ndof']} DOFs: {parts}), "
+        f"but only {format_bytes(free)} is free ({source}). Use {', '.join(advice)}, or a machine with "
+        f"more memory; set {MEMORY_ENV} to a larger figure to try all the same.",
         needed=need, available=free,
     )
 

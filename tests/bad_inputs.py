@@ -666,8 +666,10 @@ BAD_INPUTS: list[BadInput] = [
                                                      str(Path(tmp) / "out")], 2,
              "is 64 MiB, more than the 4 MiB", "check that this is the right file"),
     BadInput("a model larger than the free memory", _too_big, fe.ResourceLimit,
-             "would need about", "Use a coarser mesh, order=1, an explicit integrator",
-             note="before any assembly, carrying .needed and .available (bytes)", check=_check_limit(2**20)),
+             "would need about", "Use a coarser mesh",
+             note="before any assembly (the model's own share; its tangent and linear solver's before a static "
+             "solve, an implicit run or a modal analysis), carrying .needed and .available (bytes)",
+             check=_check_limit(2**20)),
     BadInput("a series larger than the free disk", _disk_full, fe.ResourceLimit,
              "would need about", "Record fewer frames ([output] every = N)",
              note="before the first frame is written, carrying .needed and .available (bytes)",

@@ -220,3 +220,22 @@ def test_boundary_facets_without_boundaries_and_empty_boundary():
     empty = beam_mesh().with_boundaries({"hole": np.array([], dtype=np.int64)})
     with pytest.raises(InvalidParameter, match="'hole'.*empty \\(no facets\\)"):
         boundary_facets(empty, "hole", what="Support")
+
+
+def test_a_very_short_edge_is_not_a_crack_but_coincident_vertices_are():
+    from fem_elastic import mesh_from_arrays
+
+    # two tets on a shared face; the second's apex is 0.87e-9 m off the face's vertex (1, 0, 0),
+    # below the coincidence tolerance (1e-9 of the diameter, 1.7e-9 m) but an edge of that tet:
+    # the vertices are connected through it (its volume, 3e-9 of the mean, passes the
+    # degenerate check at 1e-10)
+    eps = 5e-10
+    p = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1 + eps, eps, eps]], dtype=float)
+    t = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])
+    mesh = mesh_from_arrays(p, t, reorient=True)
+    assert validate_mesh(mesh) is mesh
+    # the same two points as two copies of one vertex in tets that do not share them: a crack
+    p2 = np.vstack([p[:4], [[1, 1, 1]], p[1:2]])  # vertex 5 duplicates vertex 1
+    t2 = np.array([[0, 1, 2, 3], [5, 2, 3, 4]])
+    with pytest.raises(InvalidMesh, match=r"1 pair\(s\) of vertices coincide"):
+        mesh_from_arrays(p2, t2, reorient=True)

@@ -116,3 +116,18 @@ def test_a_failed_static_solve_names_the_inversion_before_the_advice():
     text = _diagnose_failure(model, x.ravel(), total)
     assert text.startswith("At load factor 0.5, 18 tets have det F <= 0")
     assert _diagnose_failure(model, model.X.copy(), total) == ""  # nothing to name: the generic advice
+
+
+def test_a_crushing_static_solve_names_the_inversion_of_the_failed_attempt():
+    # the right face pushed 1.5 lengths to the left, through the clamped one, in one load step
+    # of 5 Newton iterations: the step to 1 fails, the halved step to 0.5 too, and the increment
+    # then falls below min_load_step. The last converged state is the rest state (nothing
+    # inverted): only the failed attempt at 0.5 shows what went wrong (StVK's energy is finite
+    # for inverted tets, so Newton goes there)
+    model = fe.Model(fe.beam_mesh(length=0.4, cells=(4, 1, 1)), density=1000.0,
+                     body=fe.ElasticBody(fe.StVK(E=1e5, nu=0.3)), fixed="left",
+                     displacement={"right": (-1.5 * 0.4, None, None)})
+    with pytest.raises(fe.NotConverged, match=r"stalled at load factor 0:.*At load factor 0\.5, \d+ tets "
+                                              r"have det F <= 0 .*the load inverts elements") as err:
+        fe.solve_static(model, steps=1, max_iter=5, min_load_step=0.5, stability=False)
+    assert err.value.result.load_factor == 0.0

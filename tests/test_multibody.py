@@ -400,3 +400,19 @@ def test_render_colours_each_body_in_its_own_colour(tmp_path):
     # tab10: body 0 blue (31, 119, 180), body 1 orange (255, 127, 14); shading scales both, so
     # count pixels by which of red and blue dominates by a clear margin (60 of 255)
     assert np.count_nonzero(b - r > 60) > 50 and np.count_nonzero(r - b > 60) > 50
+
+
+@pytest.mark.parametrize("orders", [(2, 2), (2, 1)])
+def test_drawing_a_trajectory_of_quadratic_bodies_is_a_typed_error(orders):
+    pytest.importorskip("pyvista")
+    bodies = [fe.Body(MESH, 1000.0, fe.ElasticBody(fe.LinearElastic(E=1e5, nu=0.3), order=o), fixed="left",
+                      name=f"b{i}", translate=(0.0, float(i), 0.0)) for i, o in enumerate(orders)]
+    model = fe.MultiBody(bodies, gravity=G)
+    traj = fe.simulate(model, fe.SymplecticEuler(), dt=1e-4, steps=1)
+    # as MultiBody.to_pyvista: P1 only for several bodies (a P2 body's nodes are not the
+    # stacked mesh's vertices, so a mixed grid would be drawn wrong)
+    for draw in (traj.to_pyvista, lambda: traj.plot(off_screen=True)):
+        with pytest.raises(fe.InvalidParameter, match=r"linear bodies only \(order=1\)"):
+            draw()
+    with pytest.raises(fe.InvalidParameter, match=r"linear bodies only"):
+        model.to_pyvista()

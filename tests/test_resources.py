@@ -23,7 +23,8 @@ import fem_elastic as fe
 from fem_elastic.app import cli
 from fem_elastic.app.vtu import read_series
 from fem_elastic.resources import (
-    BYTES_PER_TET, DISK_ENV, MEMORY_ENV, available_memory, check_input_file, format_bytes, model_memory,
+    BYTES_PER_TET, DISK_ENV, MEMORY_ENV, MODEL_BYTES_PER_TET, available_memory, check_input_file, format_bytes,
+    model_memory,
 )
 
 SCENE = """\
@@ -179,3 +180,33 @@ def test_the_series_times_are_the_exact_step_times(tmp_path):
     # t = n dt computed as one product, bit for bit: a running sum of 0.001 drifts in the last bits
     np.testing.assert_array_equal(series.times, n * 0.001)
     assert np.cumsum(np.full(10, 0.001))[-1] != 10 * 0.001  # what the sum would have written
+
+
+def test_an_explicit_model_is_checked_for_its_own_share_and_the_tangent_where_it_is_built(monkeypatch, caplog):
+    # a limit between model + tangent (what an explicit run's critical time step assembles) and
+    # model + tangent + LU: the model builds and an explicit run goes, with its stability check;
+    # a static solve, an implicit run and modal analysis (which factorize) are refused before
+    # any assembly, with advice that applies (no order=1 for a body already of order 1)
+    mesh = fe.beam_mesh(cells=(10, 3, 3))
+    nt, nv = mesh.t.shape[1], mesh.p.shape[1]
+    own = model_memory(nt, nv, 1, tangent=False)
+    tangent = model_memory(nt, nv, 1, "none")
+    full = model_memory(nt, nv, 1)
+    assert own["solver"] == 0 and own["total"] == MODEL_BYTES_PER_TET[1] * nt < tangent["total"] < full["total"]
+    monkeypatch.setenv(MEMORY_ENV, str(int(0.5 * (tangent["total"] + full["total"]))))
+    body = fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3))
+    model = fe.Model(mesh, density=1000.0, body=body, fixed="left", gravity=(0, 0, -9.81))
+    with caplog.at_level("WARNING"):
+        run = fe.simulate(model, fe.SymplecticEuler(), dt=1e-4, steps=3)
+    assert np.isfinite(run.final_state.x).all()
+    assert "could not estimate the critical time step" not in caplog.text  # its tangent fits
+    for work in (lambda: fe.solve_static(model), lambda: fe.simulate(model, fe.ImplicitEuler(), dt=0.01, steps=1),
+                 lambda: fe.natural_frequencies(model, 2)):
+        with pytest.raises(fe.ResourceLimit, match=r"the tangent of this model .*with its linear solver.*"
+                                                   r"explicit integrator") as err:
+            work()
+        assert "order=1" not in str(err.value)
+    with pytest.raises(fe.ResourceLimit, match=r"this model \(.*order 2\).*for the model, no matrix.*order=1") as err:
+        fe.Model(mesh, density=1000.0, body=fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3), order=2),
+                 fixed="left")
+    assert "explicit integrator" not in str(err.value)  # no matrix in that share: no such advice

@@ -152,3 +152,49 @@ def test_render_is_public():
 
     assert fe.render is render and fe.render_runs is render.render_runs
     assert fe.render_frame is render.render_frame and "render" in fe.__all__
+
+
+def test_save_does_not_delete_a_users_files_and_locks_the_directory(tmp_path, runs):
+    from fem_elastic.app.run_lock import RunLock
+
+    model, traj, static = runs
+    user = tmp_path / "mine"
+    (user / "frames").mkdir(parents=True)
+    (user / "notes.txt").write_text("keep me")
+    (user / "summary.json").write_text('{"mine": true}')
+    (user / "frames" / "frame_000000.vtu").write_text("my frame")
+    for result in (traj, static):
+        with pytest.raises(fe.InvalidParameter, match=r"notes\.txt.*overwrite=True"):
+            result.save(user)
+        assert (user / "summary.json").read_text() == '{"mine": true}'  # nothing removed
+        assert (user / "frames" / "frame_000000.vtu").read_text() == "my frame"
+    static.save(user, overwrite=True)  # files with a run's names replaced, the others left
+    assert (user / "notes.txt").read_text() == "keep me"
+    assert json.loads((user / "summary.json").read_text())["status"] == "completed"
+    saved = traj.save(tmp_path / "dyn")
+    traj.save(saved)  # a result saved before is replaced without asking
+    with RunLock(saved):  # another writer holds it (flock locks are per open file): refused
+        with pytest.raises(fe.OutputInUse):
+            traj.save(saved)
+
+
+def test_saved_static_frames_say_their_time_is_the_load_factor(tmp_path, runs):
+    meshio = pytest.importorskip("meshio")
+    from fem_elastic.app.vtu import vtu_units
+
+    model, traj, static = runs
+    for result, unit in ((static, "1 (load factor)"), (traj, "s")):
+        run_dir = result.save(tmp_path / unit.split()[0])
+        frame = sorted((run_dir / "frames").glob("frame_*.vtu"))[-1]
+        assert vtu_units(meshio.read(frame).field_data)["TimeValue"] == unit
+
+
+def test_a_saved_diverged_trajectory_says_diverged(tmp_path):
+    model = _model()
+    # 9x the critical time step (5.7 ms) with no sub-steps: the energy blows up at the first step
+    with pytest.warns(fe.StabilityWarning), pytest.raises(fe.Diverged) as err:
+        fe.simulate(model, fe.SymplecticEuler(max_substeps=1), dt=0.05, steps=20)
+    traj = err.value.trajectory
+    traj.save(tmp_path / "div", model=model)
+    summary = json.loads((tmp_path / "div" / "summary.json").read_text())
+    assert summary["status"] == "diverged" and summary["message"].startswith("diverged at step")

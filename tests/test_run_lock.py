@@ -225,3 +225,35 @@ def test_rendering_a_run_directory_again_replaces_its_own_render(tmp_path):
     assert check_render_target(run / "png", "png", [run]) == run / "png"
     with pytest.raises(fe.InvalidParameter, match="never writes over its inputs"):
         check_render_target(run / "checkpoint" / "pictures", "png", [run / ".." / "fem"])
+
+
+@pytest.mark.parametrize("stop", [False, True])
+def test_the_scene_summary_is_written_while_the_lock_is_held(stop, tmp_path, monkeypatch):
+    import json
+
+    from fem_elastic.app import output, runner
+
+    out = tmp_path / "out"
+    written = {}
+    write = output.write_summary
+
+    def spy(path, summary):  # is the directory still locked? another RunLock on it must fail
+        try:
+            with RunLock(out):
+                held = False
+        except fe.OutputInUse:
+            held = True
+        written[Path(path).relative_to(out).as_posix()] = held
+        return write(path, summary)
+
+    monkeypatch.setattr(output, "write_summary", spy)
+    if stop:  # Ctrl-C while setting up the variant's series
+        monkeypatch.setattr(runner, "run_variant", lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt))
+        with pytest.raises(runner.SceneInterrupted):
+            runner.run_scene(fe.load_scene(_scene(tmp_path)), out)
+    else:
+        runner.run_scene(fe.load_scene(_scene(tmp_path)), out)
+    assert written["summary.json"] is True, written
+    assert all(written.values()), written
+    status = json.loads((out / "summary.json").read_text())["status"]
+    assert status == ("interrupted" if stop else "completed")

@@ -201,39 +201,16 @@ def _run_scene_command(scene, out_dir, out, **options) -> int:
 
 
 def _finish_scene_command(scene, out_dir, outcomes, rendered, t0, out) -> int:
-    _write_scene_summary(out_dir, scene, outcomes, rendered, time.perf_counter() - t0)
+    # OUT/summary.json: run_scene wrote it while it held the directory's lock
     _print_outcomes(out, outcomes, rendered, out_dir)
     out(f"total {time.perf_counter() - t0:.1f} s")
     return 0 if all(o.status == "completed" for o in outcomes) else _EXIT_FAILED
 
 
 def _interrupted(stop, out_dir, scene, seconds) -> int:
-    """Ctrl-C: say what stopped, keep the scene's summary true, exit 130."""
-    _write_scene_summary(out_dir, scene, stop.outcomes, [], seconds, status="interrupted")
+    """Ctrl-C: say what stopped (run_scene wrote the scene's summary, "interrupted"), exit 130."""
     sys.stderr.write(f"fem-elastic: {stop.outcome.name}: {stop.outcome.message}\n")
     return _EXIT_INTERRUPTED
-
-
-def _write_scene_summary(out_dir, scene, outcomes, rendered, seconds, status=None) -> None:
-    from .output import write_summary
-
-    write_summary(
-        Path(out_dir) / "summary.json",
-        {
-            "scene": scene.name,
-            "source": str(scene.source),
-            "status": status or ("completed" if all(o.status == "completed" for o in outcomes)
-                                 else "failed"),
-            "seconds_total": seconds,
-            "variants": {
-                o.name: {"status": o.status, "message": o.message, "run_dir": o.run_dir.name,
-                         "seconds_simulate": o.seconds_simulate, "seconds_output": o.seconds_output,
-                         **(getattr(o, "figures", None) or {})}
-                for o in outcomes
-            },
-            "rendered": [str(Path(p).relative_to(out_dir)) for p in rendered],
-        },
-    )
 
 
 def _run(args) -> int:
@@ -301,8 +278,7 @@ def _demo(args) -> int:
                                        overwrite=args.overwrite)
     except SceneInterrupted as stop:
         return _interrupted(stop, out_dir, scene, time.perf_counter() - t0)
-    seconds = time.perf_counter() - t0
-    _write_scene_summary(out_dir, scene, outcomes, rendered, seconds)
+    seconds = time.perf_counter() - t0  # OUT/summary.json: written by run_scene under its lock
 
     # Tip deflection at the end of the run against the static answer of beam theory under
     # self weight, and against the same discretization solved statically.

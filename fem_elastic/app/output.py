@@ -53,6 +53,8 @@ STATUSES = ("completed", "interrupted", "diverged", "failed")
 #: The units of a frame's arrays, stored in each VTU (``fem_elastic.app.vtu.vtu_units``).
 FRAME_UNITS = {"points": REFERENCE_POINTS, "displacement": "m", "velocity": "m/s",
                "von_mises": "Pa", "energy_density": "J/m^3", "TimeValue": "s"}
+#: The unit of ``TimeValue`` in a static run's frames: their "time" is the load factor.
+LOAD_FACTOR_UNIT = "1 (load factor)"
 
 
 def frame_grid(model) -> tuple[np.ndarray, np.ndarray]:
@@ -231,6 +233,9 @@ class SeriesWriter(Observer):
         same run (:func:`fe.load_checkpoint`): its frames are kept, frames
         written after it (by the run that was stopped) are removed, and the
         next frame written is the checkpoint's next one.
+    time_unit : str
+        The unit of the frames' ``TimeValue`` recorded in their ``units``: ``"s"``,
+        or :data:`LOAD_FACTOR_UNIT` for a static load path (time = load factor).
 
     Attributes
     ----------
@@ -264,7 +269,8 @@ class SeriesWriter(Observer):
     """
 
     def __init__(self, model, run_dir, *, every: int = 1, n_steps: int | None = None,
-                 info: dict | None = None, compression: str | None = "zlib", resume_from=None):
+                 info: dict | None = None, compression: str | None = "zlib", resume_from=None,
+                 time_unit: str = "s"):
         if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
             raise InvalidParameter(
                 f"every must be an integer >= 1 (steps per frame), got {every!r}."
@@ -285,6 +291,7 @@ class SeriesWriter(Observer):
         self.n_steps = None if n_steps is None else int(n_steps)
         self.info = dict(info or {})
         self.compression = compression
+        self.units = {**FRAME_UNITS, "TimeValue": str(time_unit)}
         self.frames: list[tuple[float, str]] = []
         self.fields = CellFields(model)
         self._X = model.to_vertices(model.X)  # (nv, 3) reference vertex positions (m)
@@ -377,7 +384,7 @@ class SeriesWriter(Observer):
         path = write_vtu_frame(self.run_dir / name, self._nodes, self._cells,
                                {"displacement": u, "velocity": v}, fields,
                                compression=self.compression,
-                               field_data={"TimeValue": [float(state.t)]}, units=FRAME_UNITS)
+                               field_data={"TimeValue": [float(state.t)]}, units=self.units)
         entries = self.frames + [(float(state.t), name)]
         write_pvd(self.run_dir / PVD_NAME, entries)
         self.frames = entries  # only now: a failed write leaves the series as it was

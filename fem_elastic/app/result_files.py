@@ -17,13 +17,24 @@ import numpy as np
 from ..dynamics.state import State
 from ..physics import result_view
 from ..physics.pyvista_grid import nodal_positions
-from .output import SeriesWriter
+from .output import LOAD_FACTOR_UNIT, SeriesWriter
+from .run_lock import RunLock, _is_run_dir, check_output_dir
 from .static_run import static_figures
 
 __all__ = ["save_trajectory", "save_static_result", "dynamic_figures", "probe_figures"]
 
 
-def save_trajectory(traj, run_dir, model) -> Path:
+def _open_run_dir(run_dir, overwrite: bool) -> Path:
+    """The checked, existing ``run_dir`` to save into (see :func:`save_trajectory`)."""
+    path = Path(run_dir) if run_dir is not None else None
+    # a directory that holds a saved result (and nothing else) is replaced without asking
+    again = path is not None and path.is_dir() and _is_run_dir(path)
+    path = check_output_dir(run_dir, overwrite=overwrite or again, option="save(..., overwrite=True)")
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def save_trajectory(traj, run_dir, model, *, overwrite: bool = False) -> Path:
     """Write a :class:`fe.Trajectory` of ``model`` as a run directory; return ``run_dir``.
 
     Every recorded frame is written; the trajectory's final state is the last
@@ -31,7 +42,21 @@ def save_trajectory(traj, run_dir, model) -> Path:
     mid-edge nodes of the other frames are at their edge's mean
     (:func:`~fem_elastic.physics.pyvista_grid.nodal_positions`), and so are the
     stresses computed there.
+
+    ``run_dir`` must be new, empty or a result saved before (which is replaced);
+    a directory holding other files is refused (:class:`fe.InvalidParameter`)
+    unless ``overwrite`` (then files with a run's names, ``series.pvd``,
+    ``summary.json``, ``frames/frame_*.vtu``, are replaced and the others left).
+    The directory is locked (:class:`~fem_elastic.app.run_lock.RunLock`) while
+    it is written: a second writer gets :class:`fe.OutputInUse`.
     """
+    run_dir = _open_run_dir(run_dir, overwrite)
+    with RunLock(run_dir):
+        _write_trajectory(traj, run_dir, model)
+    return run_dir
+
+
+def _write_trajectory(traj, run_dir: Path, model) -> None:
     X = np.asarray(model.X)
     writer = SeriesWriter(model, run_dir, every=1, info={"variant": Path(run_dir).name})
     final = traj.final_state
@@ -42,18 +67,29 @@ def save_trajectory(traj, run_dir, model) -> Path:
             state = State(X + nodal_positions(model, traj.displacement[k]),
                           nodal_positions(model, traj.velocity[k]), float(t))
         writer.write_state(state)
-    status = "completed" if traj.message.startswith("completed") else "interrupted"
+    # as the command records it: "diverged" / "failed" from fe.Diverged / fe.StepFailed's
+    # trajectory (its message says which), "interrupted" for one stopped any other way
+    word = traj.message.split(" ", 1)[0] if traj.message else ""
+    status = word if word in ("completed", "diverged", "failed") else "interrupted"
     writer.finish(traj, status=status, extra=dynamic_figures(model, traj))
-    return Path(run_dir)
 
 
-def save_static_result(result, run_dir, model) -> Path:
+def save_static_result(result, run_dir, model, *, overwrite: bool = False) -> Path:
     """Write a :class:`fe.StaticResult`'s load path as a run directory; return ``run_dir``.
 
     Each converged point is a frame whose time is its load factor (as a static
     scene's run); ``summary.json`` holds :func:`~fem_elastic.app.static_run.static_figures`.
+    ``run_dir`` and ``overwrite`` as in :func:`save_trajectory` (checked, locked).
     """
-    writer = SeriesWriter(model, run_dir, every=1, info={"variant": Path(run_dir).name})
+    run_dir = _open_run_dir(run_dir, overwrite)
+    with RunLock(run_dir):
+        _write_static_result(result, run_dir, model)
+    return run_dir
+
+
+def _write_static_result(result, run_dir: Path, model) -> None:
+    writer = SeriesWriter(model, run_dir, every=1, info={"variant": Path(run_dir).name},
+                          time_unit=LOAD_FACTOR_UNIT)
     v0 = np.zeros(model.ndofs)
     points = list(result.path) or []
     for point in points:
@@ -63,7 +99,6 @@ def save_static_result(result, run_dir, model) -> Path:
     writer.finish(None, status="completed" if result.converged else "failed",
                   message=result.message, extra=extra,
                   final_state=State(result.x, v0, float(result.load_factor)))
-    return Path(run_dir)
 
 
 def probe_figures(model, probes, times, displacement) -> dict:

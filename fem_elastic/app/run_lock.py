@@ -158,7 +158,7 @@ def _is_run_dir(path: Path) -> bool:
         names = {p.name for p in path.iterdir()}
     except OSError:
         return False
-    names = {n for n in names if not _is_temporary(n)}
+    names = {n for n in names if not _is_temporary(n) and n != LOCK_NAME}  # a saved result's lock
     # only a run's names, and a file that only a run writes (a bare "frames" folder may be anyone's)
     return names <= RUN_DIR_FILES and bool(names & {"series.pvd", "summary.json", "checkpoint"})
 
@@ -183,7 +183,7 @@ def foreign_entries(directory: Path) -> list[str]:
     return foreign
 
 
-def check_output_dir(out_dir, *, overwrite: bool = False) -> Path:
+def check_output_dir(out_dir, *, overwrite: bool = False, option: str = "--overwrite") -> Path:
     """Refuse an output directory a run must not write into, before anything is written.
 
     Parameters
@@ -193,6 +193,9 @@ def check_output_dir(out_dir, *, overwrite: bool = False) -> Path:
     overwrite : bool
         Write into a directory that holds other files all the same (they are
         left as they are; files with a run's names are replaced).
+    option : str
+        How the caller spells ``overwrite``, for the message (``"--overwrite"`` on the
+        command line, ``"overwrite=True"`` for ``result.save``).
 
     Returns
     -------
@@ -219,8 +222,8 @@ def check_output_dir(out_dir, *, overwrite: bool = False) -> Path:
         shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
         raise InvalidParameter(
             f"the output directory {path} holds files that a run did not write ({shown}); a run "
-            "would mix its output with them. Give a new or empty directory, or --overwrite to write "
-            "there all the same (those files are left alone)."
+            f"would mix its output with them. Give a new or empty directory, or {option} to write "
+            "there all the same (those files are left alone; files with a run's names are replaced)."
         )
     return path
 

@@ -34,7 +34,7 @@ from ..errors import Diverged, InvalidParameter, StepFailed
 
 log = logging.getLogger(__name__)
 
-__all__ = ["RunOutcome", "SceneInterrupted", "run_scene", "run_variant", "render_outputs",
+__all__ = ["RunOutcome", "SceneInterrupted", "run_scene", "write_scene_summary", "run_variant", "render_outputs",
            "read_resumable", "resume_scene", "CHECKPOINT_DIR", "output_bytes"]
 
 #: The checkpoint directory inside a run directory.
@@ -300,13 +300,60 @@ def run_scene(scene, out_dir, *, variants=None, progress: bool = False, render: 
     """
     from .run_lock import RunLock, check_output_dir, remove_stale_variants
 
+    t0 = time.perf_counter()
     out_dir = check_output_dir(out_dir, overwrite=overwrite or resume)
     runs = scene.build(variants)  # before touching the directory: a bad scene leaves it as it was
     out_dir.mkdir(parents=True, exist_ok=True)
     with RunLock(out_dir):  # one run at a time in a directory; dropped on any exit, Ctrl-C too
         if not resume:  # the folders of variants this scene does not have are another run's
             remove_stale_variants(out_dir, list(scene.variants) + [r.name for r in runs])
-        return _run_locked(scene, out_dir, runs, variants, progress, render, checkpoint_every, resume)
+        try:
+            outcomes, rendered = _run_locked(scene, out_dir, runs, variants, progress, render,
+                                             checkpoint_every, resume)
+        except SceneInterrupted as stop:  # the scene's summary says so, written under the lock
+            write_scene_summary(out_dir, scene, stop.outcomes, [], time.perf_counter() - t0,
+                                status="interrupted")
+            raise
+        write_scene_summary(out_dir, scene, outcomes, rendered, time.perf_counter() - t0)
+        return outcomes, rendered
+
+
+def write_scene_summary(out_dir, scene, outcomes, rendered, seconds, status=None) -> None:
+    """Write ``OUT/summary.json``: the scene's status and every variant's figures.
+
+    :func:`run_scene` writes it while it holds the output directory's lock.
+
+    Parameters
+    ----------
+    out_dir : path-like
+    scene : Scene
+    outcomes : list of RunOutcome
+    rendered : list of path-like
+        The rendered files (under ``out_dir``).
+    seconds : float
+        Wall time of the whole run (s).
+    status : str, optional
+        Default ``"completed"`` when every variant completed, else ``"failed"``.
+    """
+    from .output import write_summary
+
+    write_summary(
+        Path(out_dir) / "summary.json",
+        {
+            "scene": scene.name,
+            "source": str(scene.source),
+            "status": status or ("completed" if all(o.status == "completed" for o in outcomes)
+                                 else "failed"),
+            "seconds_total": seconds,
+            "variants": {
+                o.name: {"status": o.status, "message": o.message, "run_dir": o.run_dir.name,
+                         "seconds_simulate": o.seconds_simulate, "seconds_output": o.seconds_output,
+                         **(getattr(o, "figures", None) or {})}
+                for o in outcomes
+            },
+            "rendered": [str(Path(p).relative_to(out_dir)) for p in rendered],
+        },
+    )
 
 
 def _run_locked(scene, out_dir, runs, variants, progress, render, checkpoint_every, resume):

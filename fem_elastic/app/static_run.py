@@ -82,12 +82,12 @@ def run_static_variant(run, out_dir):
         ``result`` is the :class:`fe.StaticResult`, ``figures`` the physical result.
     """
     from ..dynamics.state import State
-    from .output import SeriesWriter
+    from .output import LOAD_FACTOR_UNIT, SeriesWriter
     from .runner import RunOutcome
 
     model = run.model
     run_dir = Path(out_dir) / run.name
-    writer = SeriesWriter(model, run_dir, every=1, info=run.info)
+    writer = SeriesWriter(model, run_dir, every=1, info=run.info, time_unit=LOAD_FACTOR_UNIT)
     t0 = time.perf_counter()
     status, message = "completed", ""
     caught = []

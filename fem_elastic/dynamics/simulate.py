@@ -159,6 +159,10 @@ def simulate(
     check_state(model, state)
     n_steps = _n_steps(h, t_end, steps, state.t)
     _check_options(integrator, callback, record_every, energy_growth, observers)
+    # before the first step: a Newton-based scheme assembles the tangent and solves with it
+    memory_check = getattr(model, "check_tangent_memory", None)
+    if memory_check is not None and not getattr(integrator, "explicit", True) and hasattr(integrator, "linear_solver"):
+        memory_check("auto")
     if check_stability and getattr(integrator, "explicit", False) and not getattr(integrator, "substep", False):
         _warn_if_unstable(model, integrator, h)
     ckpt, start = _checkpointer(model, integrator, h, n_steps, int(record_every), state, energy_growth,

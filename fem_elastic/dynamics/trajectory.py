@@ -294,7 +294,7 @@ class Trajectory:
             f"or a per-step statistic {sorted(self.step_stats)}."
         )
 
-    def save(self, run_dir, *, model=None):
+    def save(self, run_dir, *, model=None, overwrite: bool = False):
         """Write the trajectory as a run directory, the format ``fem-elastic run`` writes.
 
         ``series.pvd``, ``frames/frame_%06d.vtu`` (reference points,
@@ -302,9 +302,25 @@ class Trajectory:
         :meth:`to_pyvista`) and ``summary.json``; read it back with
         :func:`fe.read_series`, render it with ``fe.render``.
 
+        Parameters
+        ----------
+        run_dir : path-like
+            A new or empty directory, or one a result was saved in before (it is
+            replaced). One that holds other files is refused
+            (:class:`fe.InvalidParameter`) unless ``overwrite``.
+        model : Model, optional
+            The model, where the result does not know it.
+        overwrite : bool
+            Write into a directory holding other files all the same: files with a
+            run's names (``series.pvd``, ``summary.json``, ``frames/frame_*.vtu``) are
+            replaced, the others left alone.
+
+        The directory is locked while it is written: a second writer gets
+        :class:`fe.OutputInUse`.
+
         Returns
         -------
         pathlib.Path
             ``run_dir``.
         """
-        return _view.save_result("trajectory", self, run_dir, self._need_model(model))
+        return _view.save_result("trajectory", self, run_dir, self._need_model(model), overwrite=overwrite)

@@ -256,12 +256,22 @@ def _check_unused(n_vertices: int, tets: np.ndarray) -> None:
 COINCIDENT_TOL = 1e-9
 
 
-def _check_coincident(points: np.ndarray) -> None:
-    """Coincident vertices: tets on either side of them are not connected (a hidden crack)."""
+def _check_coincident(points: np.ndarray, tets: np.ndarray) -> None:
+    """Coincident vertices: tets on either side of them are not connected (a hidden crack).
+
+    Two close vertices that are the ends of an edge of some tet are connected
+    through it: a (very) short edge, not a crack.
+    """
     from scipy.spatial import cKDTree
 
     diameter = float(np.linalg.norm(np.ptp(points, axis=0)))
     pairs = cKDTree(points).query_pairs(COINCIDENT_TOL * diameter, output_type="ndarray")
+    if pairs.size:
+        n = np.int64(points.shape[0])
+        a, b = np.triu_indices(4, 1)  # the six edges of a tet
+        ends = np.sort(np.stack((tets[:, a], tets[:, b]), axis=-1).reshape(-1, 2).astype(np.int64), axis=1)
+        close = np.sort(pairs.astype(np.int64), axis=1)
+        pairs = pairs[~np.isin(close[:, 0] * n + close[:, 1], ends[:, 0] * n + ends[:, 1])]
     if pairs.size:
         dup = np.unique(pairs)
         raise InvalidMesh(
@@ -468,7 +478,7 @@ def validate_mesh(mesh, *, degenerate_tol: float = DEGENERATE_TOL):
     _check_scale(points, tets)
     _check_volumes(_signed_volumes(points, tets), degenerate_tol)
     _check_unused(points.shape[0], tets)
-    _check_coincident(points)
+    _check_coincident(points, tets)
     return mesh
 
 

@@ -109,8 +109,9 @@ class Model:
         ground=None, damping=None, driven=None, displacement=None, contact=None,
     ):
         validate_mesh(mesh)
-        # memory, from the counts alone: a model that cannot fit says so now, not after minutes
-        check_memory(model_memory(mesh.t.shape[1], mesh.p.shape[1], getattr(body, "order", 1)),
+        # memory, from the counts alone: a model that cannot fit says so now, not after minutes;
+        # its own share only (the tangent and the solver are checked at the first linearize)
+        check_memory(model_memory(mesh.t.shape[1], mesh.p.shape[1], getattr(body, "order", 1), tangent=False),
                      f"this model ({mesh.t.shape[1]} tets, order {getattr(body, 'order', 1)})")
         if isinstance(density, bool) or not isinstance(density, (int, float, np.number)):
             raise InvalidParameter(f"density must be a number (kg/m^3), got {density!r}.")
@@ -549,7 +550,12 @@ class Model:
         which makes Newton's step a descent direction. Terms whose Hessian is
         zero (dead loads) return None and add nothing. ``body``, a Potential,
         stands in for the body's own (e.g. ``model.warped_stiffness``).
+
+        The first call checks that the assembled tangent fits in memory (see
+        :meth:`check_tangent_memory`; the linear solver's share is checked where a solve
+        follows: static solves, implicit integrators, modal analysis).
         """
+        self.check_tangent_memory("none")
         g = np.zeros(self.ndofs)
         H = None
         for term, c in self._scaled_terms(load_factor, body):
@@ -559,6 +565,25 @@ class Model:
                 Ht = Ht if c == 1.0 else c * Ht  # keep the body's matrix (and its pattern) as is
                 H = Ht if H is None else H + Ht
         return g, H
+
+    def check_tangent_memory(self, solver: str = "auto") -> None:
+        """:class:`fe.ResourceLimit` unless the tangent (and ``solver``'s share) fit in memory.
+
+        The model's own share is checked when it is built; this checks the assembled
+        tangent on top of it, and with ``solver`` ``"auto"``, ``"direct"`` or
+        ``"iterative"`` the linear solver's share (:func:`fem_elastic.resources.model_memory`),
+        ``"none"`` for none. Each kind is checked once per model (a solver's check
+        covers the tangent alone).
+        """
+        done = self.__dict__.setdefault("_memory_checked", set())
+        if solver in done or (solver == "none" and done):
+            return
+        nt = self.mesh.t.shape[1]
+        what = f"the tangent of this model ({nt} tets, order {self.space.order})"
+        if solver != "none":
+            what += " with its linear solver"
+        check_memory(model_memory(nt, self.mesh.p.shape[1], self.space.order, solver), what)
+        done.add(solver)
 
     # supports -----------------------------------------------------------------
     def _resolve_fixed(self, fixed, what: str = "fixed") -> np.ndarray:

@@ -145,13 +145,17 @@ def register_writer(kind: str, writer: Callable) -> None:
     ----------
     kind : {"trajectory", "static"}
     writer : callable
-        ``writer(result, run_dir, model) -> pathlib.Path``.
+        ``writer(result, run_dir, model, *, overwrite=False) -> pathlib.Path``.
     """
     _WRITERS[kind] = writer
 
 
-def save_result(kind: str, result, run_dir, model):
-    """Save ``result`` as a run directory with the writer registered for ``kind``."""
+def save_result(kind: str, result, run_dir, model, *, overwrite: bool = False):
+    """Save ``result`` as a run directory with the writer registered for ``kind``.
+
+    ``overwrite``: write into a directory that holds other files all the same (see
+    :func:`fem_elastic.app.result_files.save_trajectory`).
+    """
     writer = _WRITERS.get(kind)
     if writer is None:  # only when fem_elastic.app could not be imported
         raise MissingDependency(
@@ -162,4 +166,4 @@ def save_result(kind: str, result, run_dir, model):
         raise InvalidParameter(
             "this result does not know its model; pass it: result.save(run_dir, model=model)."
         )
-    return writer(result, run_dir, model)
+    return writer(result, run_dir, model, overwrite=overwrite)

@@ -268,6 +268,9 @@ def natural_frequencies(model, n: int = 6, *, x=None, mass: str = "consistent", 
     """
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise InvalidParameter(f"n must be a positive integer (how many frequencies), got {n!r}.")
+    memory_check = getattr(model, "check_tangent_memory", None)  # shift-invert factorizes K - sigma M
+    if memory_check is not None:
+        memory_check("direct")
     K, M, idx, m_lumped = _free_system(model, x, mass)
     nfree = idx.size
     if n >= nfree:

@@ -476,6 +476,9 @@ def solve_static(
         )
     reject_impulse_contact(model, "fe.solve_static")
     model.check_supported()
+    memory_check = getattr(model, "check_tangent_memory", None)  # before any assembly (ResourceLimit)
+    if memory_check is not None:
+        memory_check("auto")
     _check_conditioning(model)
     t_start = time.perf_counter()
     solver = linear_solver if linear_solver is not None else AutoSolver()
@@ -515,6 +518,7 @@ def solve_static(
         total.path.append(problem.point(x, 1.0))
         checked(total.path[-1])
         total.message = "no load: the rest state"
+    failed = None  # (x, load factor) of the last failed attempt: what the diagnosis looks at
     while s < 1.0:
         target = min(1.0, s + ds)
         if steps is not None:  # do not step over the next point of the grid
@@ -525,7 +529,20 @@ def solve_static(
         x0, pred = _predictor(model, problem, x, s, target, solver, near_null, pattern, total.seconds)
         max_step = _contact_max_step(model)
         if max_step is not None and pred and max_step(x, x0 - x) < 1.0:
-            x0, pred = x.copy(), 0  # the predictor would pass through a contact (IPC)
+            # the predictor would pass through a contact (IPC): start from the last equilibrium
+            # with only the prescribed DOFs moved to the target (Newton moves only free DOFs,
+            # so they must be at the target from the start)
+            x0, pred = problem.held(x, target), 0
+        if max_step is not None and max_step(x, x0 - x) < 1.0:
+            # the prescribed DOFs alone would cross a contact: a smaller load increment
+            ds /= 2
+            log.info("load factor %.4g: the prescribed motion crosses a contact; halving the "
+                     "increment to %.3g", target, ds)
+            if ds < min_load_step:
+                total.message = (f"stalled at load factor {s:.4g}: the prescribed displacement "
+                                 "drives a body through a contact")
+                break
+            continue
         res = newton_minimize(
             lambda y: model.energy(y, target),
             lambda y, proj: model.linearize(y, target, project=proj),
@@ -560,6 +577,7 @@ def solve_static(
                 ds = min(2 * ds, max_ds)
             log.info("load factor %.4g reached in %d Newton iterations", s, res.iterations)
         else:
+            failed = (res.x, target)
             ds /= 2
             log.info("load factor %.4g failed (%s); halving the increment to %.3g", target, res.message, ds)
             if ds < min_load_step:
@@ -585,7 +603,8 @@ def solve_static(
     total.reactions, total.reaction_dofs = last.reactions, last.reaction_dofs
     total.wall_time = time.perf_counter() - t_start
     if check and not total.converged:
-        diagnosis = _diagnose_failure(model, x, total)
+        x_failed, s_failed = failed if failed is not None else (x, total.load_factor)
+        diagnosis = _diagnose_failure(model, x_failed, total, s_failed)
         raise NotConverged(
             f"solve_static did not reach the full load: {total.message}. "
             + (f"{diagnosis} " if diagnosis else "")
@@ -598,8 +617,13 @@ def solve_static(
     return total
 
 
-def _diagnose_failure(model, x, total) -> str:
-    """The cause of a failed load path, where one can be named (before the generic advice)."""
+def _diagnose_failure(model, x, total, load_factor=None) -> str:
+    """The cause of a failed load path, where one can be named (before the generic advice).
+
+    ``x`` is the last failed attempt's iterate (at ``load_factor``, default the
+    result's), where an inversion shows, not the last converged state.
+    """
+    load_factor = total.load_factor if load_factor is None else load_factor
     from ..physics.inversion import DetF
 
     try:
@@ -610,7 +634,7 @@ def _diagnose_failure(model, x, total) -> str:
         return "The last iterate is not finite."
     bad = int(np.sum(J <= 0))
     if bad:
-        return (f"At load factor {total.load_factor:.4g}, {bad} {DetF(model).where} have det F <= 0 "
+        return (f"At load factor {load_factor:.4g}, {bad} {DetF(model).where} have det F <= 0 "
                 f"(min {float(J.min()):.3g}): the load inverts elements, which this material "
                 "cannot follow; a finer mesh, order=2, or a material that allows inversion "
                 "(fe.StableNeoHookean) may carry it.")

@@ -176,16 +176,32 @@ class StaticResultView:
             "'residual'."
         )
 
-    def save(self, run_dir, *, model=None):
+    def save(self, run_dir, *, model=None, overwrite: bool = False):
         """Write the load path as a run directory (the format ``fem-elastic run`` writes).
 
         Each converged point is a frame whose "time" is its load factor, and
         ``summary.json`` holds the physical result (largest displacement,
         reactions per support, stability).
 
+        Parameters
+        ----------
+        run_dir : path-like
+            A new or empty directory, or one a result was saved in before (it is
+            replaced). One that holds other files is refused
+            (:class:`fe.InvalidParameter`) unless ``overwrite``.
+        model : Model, optional
+            The model, where the result does not know it.
+        overwrite : bool
+            Write into a directory holding other files all the same: files with a
+            run's names (``series.pvd``, ``summary.json``, ``frames/frame_*.vtu``) are
+            replaced, the others left alone.
+
+        The directory is locked while it is written: a second writer gets
+        :class:`fe.OutputInUse`.
+
         Returns
         -------
         pathlib.Path
             ``run_dir``.
         """
-        return _view.save_result("static", self, run_dir, self._need_model(model))
+        return _view.save_result("static", self, run_dir, self._need_model(model), overwrite=overwrite)
