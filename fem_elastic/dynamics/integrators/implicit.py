@@ -36,6 +36,10 @@ from .incremental import IncrementalPotential
 
 __all__ = ["ImplicitEuler", "LinearizedImplicitEuler"]
 
+_DRIVEN_THROUGH_CONTACT = (
+    "the driven boundary's motion over the step carries a surface through a contact (IPC's "
+    "continuous collision detection); a shorter step moves it less"
+)
 _INVERTED_AT_START = (
     "an element is inverted at the start of the step (in the state given, or by the prescribed "
     "boundary motion over one step), where the body's energy is not defined"
@@ -199,6 +203,11 @@ class ImplicitEuler(_Implicit):
         x_old = state.x.copy()
         x_old[dofs] = xc
         max_step = _contact_max_step(model)
+        if (max_step is not None and np.any(x_old[dofs] != state.x[dofs])
+                and max_step(state.x, x_old - state.x) < 1.0):
+            # the driven DOFs' own motion over the step would carry a surface through a contact:
+            # the solve would start intersecting; a shorter step (cut back) moves them less
+            return None, _DRIVEN_THROUGH_CONTACT
         if max_step is not None and max_step(x_old, x0 - x_old) < 1.0:
             x0 = x_old  # the prediction would pass through a contact: start from the old positions
         g0, g_old = G.energy(x0), G.energy(x_old)
