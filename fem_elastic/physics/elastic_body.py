@@ -195,11 +195,17 @@ class ElasticPotential(Potential):
         return self._force(self.material.dpsi_dF(self.F(x)))
 
     def hessian(self, x: np.ndarray, project: bool = False) -> sp.csr_matrix:
+        kernels = self._fused()
+        if kernels is not None:  # tangent per element, scattered straight into the CSR data
+            return kernels.hessian(x, self.space.pattern, project)
         F = self.F(x)
         C = self.material.d2psi_dF2_psd(F) if project else self.material.d2psi_dF2(F)
         return self.space.pattern.assemble(self.element_stiffness(C))
 
     def linearize(self, x: np.ndarray, project: bool = False):
+        kernels = self._fused()
+        if kernels is not None:
+            return kernels.gradient(x), kernels.hessian(x, self.space.pattern, project)
         P, C = self.material.stress_and_tangent(self.F(x), project=project)
         return self._force(P), self.space.pattern.assemble(self.element_stiffness(C))
 
