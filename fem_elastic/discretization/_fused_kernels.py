@@ -41,6 +41,12 @@ import numpy as np
 LINEAR, STVK, NEOHOOKEAN, STABLE_NEOHOOKEAN = 0, 1, 2, 3
 
 _jit = numba.njit(cache=True, error_model="numpy", nogil=True)
+#: Element functions inlined into their loops at numba's IR level (an element function called
+#: per element from the gradient loop measured 16.6 ms on the 153,600-tet beam against 11.1 ms
+#: for the body written out in the loop, in the same run).
+_jit_inline = numba.njit(cache=True, error_model="numpy", nogil=True, inline="always")
+#: The threaded loops: prange over independent pieces, one parallel region per call.
+_pjit = numba.njit(cache=True, error_model="numpy", nogil=True, parallel=True)
 
 
 # pointwise materials ----------------------------------------------------------------
@@ -263,6 +269,76 @@ def _deformation_gradient(x, X, nodes, Dm_inv, e):
     )
 
 
+@_jit_inline
+def _deformation_gradient9(x, X, nodes, D, e):
+    """:func:`_deformation_gradient` with ``D = Dm_inv.reshape(ne, 9)``: the same operations
+    (the same bits), Dm^-1 read as nine scalars rather than through a 3x3 view per element
+    (see :func:`_gradient_range`)."""
+    k0, k1, k2, k3 = 3 * nodes[e, 0], 3 * nodes[e, 1], 3 * nodes[e, 2], 3 * nodes[e, 3]
+    u0, u1, u2 = x[k0] - X[k0], x[k0 + 1] - X[k0 + 1], x[k0 + 2] - X[k0 + 2]  # as _displacements
+    a0, a1, a2 = x[k1] - X[k1] - u0, x[k1 + 1] - X[k1 + 1] - u1, x[k1 + 2] - X[k1 + 2] - u2
+    b0, b1, b2 = x[k2] - X[k2] - u0, x[k2 + 1] - X[k2 + 1] - u1, x[k2 + 2] - X[k2 + 2] - u2
+    c0, c1, c2 = x[k3] - X[k3] - u0, x[k3 + 1] - X[k3 + 1] - u1, x[k3 + 2] - X[k3 + 2] - u2
+    d00, d01, d02 = D[e, 0], D[e, 1], D[e, 2]
+    d10, d11, d12 = D[e, 3], D[e, 4], D[e, 5]
+    d20, d21, d22 = D[e, 6], D[e, 7], D[e, 8]
+    return (
+        a0 * d00 + b0 * d10 + c0 * d20 + 1.0,
+        a0 * d01 + b0 * d11 + c0 * d21,
+        a0 * d02 + b0 * d12 + c0 * d22,
+        a1 * d00 + b1 * d10 + c1 * d20,
+        a1 * d01 + b1 * d11 + c1 * d21 + 1.0,
+        a1 * d02 + b1 * d12 + c1 * d22,
+        a2 * d00 + b2 * d10 + c2 * d20,
+        a2 * d01 + b2 * d11 + c2 * d21,
+        a2 * d02 + b2 * d12 + c2 * d22 + 1.0,
+    )
+
+
+@_jit
+def _gradient_range(x, X, nodes, D, V, kind, prm, start, stop, out):
+    """out += dE_e/dx of the elements start:stop: g_ai += V P_ij dN_aj (the gradient loops' body).
+
+    ``D`` is ``Dm_inv.reshape(ne, 9)``: Dm^-1 read as nine scalars per
+    element, and the element's F (as :func:`_deformation_gradient` forms it,
+    the same operations) written out in the loop. Measured on the 153,600-tet
+    beam: 9-11 ms, against 13-17 ms for the same loop through a 3x3 view of
+    Dm_inv per element or an element function called from the loop.
+    """
+    for e in range(start, stop):
+        # F as _deformation_gradient9 forms it, written out so that D and the indices are read once
+        k0, k1, k2, k3 = 3 * nodes[e, 0], 3 * nodes[e, 1], 3 * nodes[e, 2], 3 * nodes[e, 3]
+        u0, u1, u2 = x[k0] - X[k0], x[k0 + 1] - X[k0 + 1], x[k0 + 2] - X[k0 + 2]
+        a0, a1, a2 = x[k1] - X[k1] - u0, x[k1 + 1] - X[k1 + 1] - u1, x[k1 + 2] - X[k1 + 2] - u2
+        b0, b1, b2 = x[k2] - X[k2] - u0, x[k2 + 1] - X[k2 + 1] - u1, x[k2 + 2] - X[k2 + 2] - u2
+        c0, c1, c2 = x[k3] - X[k3] - u0, x[k3 + 1] - X[k3 + 1] - u1, x[k3 + 2] - X[k3 + 2] - u2
+        d00, d01, d02 = D[e, 0], D[e, 1], D[e, 2]
+        d10, d11, d12 = D[e, 3], D[e, 4], D[e, 5]
+        d20, d21, d22 = D[e, 6], D[e, 7], D[e, 8]
+        F = (
+            a0 * d00 + b0 * d10 + c0 * d20 + 1.0,
+            a0 * d01 + b0 * d11 + c0 * d21,
+            a0 * d02 + b0 * d12 + c0 * d22,
+            a1 * d00 + b1 * d10 + c1 * d20,
+            a1 * d01 + b1 * d11 + c1 * d21 + 1.0,
+            a1 * d02 + b1 * d12 + c1 * d22,
+            a2 * d00 + b2 * d10 + c2 * d20,
+            a2 * d01 + b2 * d11 + c2 * d21,
+            a2 * d02 + b2 * d12 + c2 * d22 + 1.0,
+        )
+        p = P(kind, F, prm)
+        v = V[e]
+        for i in range(3):
+            q0, q1, q2 = p[3 * i] * v, p[3 * i + 1] * v, p[3 * i + 2] * v
+            f1 = q0 * d00 + q1 * d01 + q2 * d02
+            f2 = q0 * d10 + q1 * d11 + q2 * d12
+            f3 = q0 * d20 + q1 * d21 + q2 * d22
+            out[k1 + i] += f1
+            out[k2 + i] += f2
+            out[k3 + i] += f3
+            out[k0 + i] -= f1 + f2 + f3
+
+
 @_jit
 def gradient_p1(x, X, nodes, Dm_inv, V, kind, prm, out):
     """out = dE/dx: for each tet, g_ai += V P_ij dN_aj, scattered as it is computed.
@@ -273,21 +349,34 @@ def gradient_p1(x, X, nodes, Dm_inv, V, kind, prm, out):
     volumes; out ``(ndofs,)``, overwritten.
     """
     out[:] = 0.0
-    for e in range(nodes.shape[0]):
-        F = _deformation_gradient(x, X, nodes, Dm_inv, e)
-        p = P(kind, F, prm)
-        v = V[e]
-        d = Dm_inv[e]
-        k0, k1, k2, k3 = 3 * nodes[e, 0], 3 * nodes[e, 1], 3 * nodes[e, 2], 3 * nodes[e, 3]
-        for i in range(3):
-            q0, q1, q2 = p[3 * i] * v, p[3 * i + 1] * v, p[3 * i + 2] * v
-            f1 = q0 * d[0, 0] + q1 * d[0, 1] + q2 * d[0, 2]
-            f2 = q0 * d[1, 0] + q1 * d[1, 1] + q2 * d[1, 2]
-            f3 = q0 * d[2, 0] + q1 * d[2, 1] + q2 * d[2, 2]
-            out[k1 + i] += f1
-            out[k2 + i] += f2
-            out[k3 + i] += f3
-            out[k0 + i] -= f1 + f2 + f3
+    D = Dm_inv.reshape((Dm_inv.shape[0], 9))  # a view (Dm_inv is C-contiguous)
+    _gradient_range(x, X, nodes, D, V, kind, prm, 0, nodes.shape[0], out)
+
+
+# numba threads (NUMBA_NUM_THREADS): one parallel region per call, over vertex-disjoint parts
+
+
+@_pjit
+def gradient_p1_parts(x, X, nodes, Dm_inv, V, kind, prm, part_start, out):
+    """:func:`gradient_p1` on numba's threads: the interiors of P parts in parallel, then the seams.
+
+    The elements are given grouped: part p's interior is
+    ``part_start[p]:part_start[p + 1]`` (p < P = ``len(part_start) - 2``),
+    elements none of whose vertices another part touches, so the parts
+    scatter into disjoint entries of ``out`` without atomics; the seams (the
+    elements with a vertex shared between parts) are the last group,
+    ``part_start[P]:part_start[P + 1]``, summed serially afterwards. One
+    thread per part and a single synchronisation: a loaded machine that
+    deschedules a thread costs one wait, not one per colour. Each group keeps
+    the element order, so a vertex inside a part gets its contributions in
+    the serial loop's order; a seam vertex gets its seam elements' last.
+    """
+    out[:] = 0.0
+    D = Dm_inv.reshape((Dm_inv.shape[0], 9))
+    n_parts = part_start.shape[0] - 2
+    for p in numba.prange(n_parts):
+        _gradient_range(x, X, nodes, D, V, kind, prm, part_start[p], part_start[p + 1], out)
+    _gradient_range(x, X, nodes, D, V, kind, prm, part_start[n_parts], part_start[n_parts + 1], out)
 
 
 @_jit
@@ -299,8 +388,9 @@ def energy_p1(x, X, nodes, Dm_inv, V, kind, prm):
     """
     total = 0.0
     block = 0.0
+    D = Dm_inv.reshape((Dm_inv.shape[0], 9))  # a view (Dm_inv is C-contiguous)
     for e in range(nodes.shape[0]):
-        F = _deformation_gradient(x, X, nodes, Dm_inv, e)
+        F = _deformation_gradient9(x, X, nodes, D, e)
         w = psi(kind, F, prm)
         if not math.isfinite(w):
             return np.inf
@@ -309,6 +399,35 @@ def energy_p1(x, X, nodes, Dm_inv, V, kind, prm):
             total += block
             block = 0.0
     return total + block
+
+
+@_pjit
+def energy_p1_blocks(x, X, nodes, Dm_inv, V, kind, prm, blocks):
+    """:func:`energy_p1` on numba's threads, the same bits: its 1024-element blocks in parallel.
+
+    ``blocks`` ``(ceil(ne / 1024),)`` receives each block's sum, computed as
+    the serial loop computes it (+inf if one psi is not finite); the blocks
+    are then added in order, as the serial loop adds them. So the result
+    does not depend on the number of threads, and equals :func:`energy_p1`'s.
+    """
+    ne = nodes.shape[0]
+    D = Dm_inv.reshape((ne, 9))
+    for b in numba.prange(blocks.shape[0]):
+        block = 0.0
+        for e in range(b * 1024, min(ne, (b + 1) * 1024)):
+            F = _deformation_gradient9(x, X, nodes, D, e)
+            w = psi(kind, F, prm)
+            if not math.isfinite(w):
+                block = np.inf
+                break
+            block += w * V[e]
+        blocks[b] = block
+    total = 0.0
+    for b in range(blocks.shape[0]):
+        if blocks[b] == np.inf:
+            return np.inf
+        total += blocks[b]
+    return total
 
 
 @_jit
@@ -605,6 +724,26 @@ def tet_volume_ratios(p, tets, ref_det, out):
     per-step inversion watch cost more than a fused explicit step).
     """
     for e in range(tets.shape[1]):
+        i0, i1, i2, i3 = tets[0, e], tets[1, e], tets[2, e], tets[3, e]
+        a00 = p[i1, 0] - p[i0, 0]
+        a10 = p[i1, 1] - p[i0, 1]
+        a20 = p[i1, 2] - p[i0, 2]
+        a01 = p[i2, 0] - p[i0, 0]
+        a11 = p[i2, 1] - p[i0, 1]
+        a21 = p[i2, 2] - p[i0, 2]
+        a02 = p[i3, 0] - p[i0, 0]
+        a12 = p[i3, 1] - p[i0, 1]
+        a22 = p[i3, 2] - p[i0, 2]
+        det = (a00 * (a11 * a22 - a12 * a21)
+               - a01 * (a10 * a22 - a12 * a20)
+               + a02 * (a10 * a21 - a11 * a20))
+        out[e] = det / ref_det[e]
+
+
+@_pjit
+def tet_volume_ratios_threaded(p, tets, ref_det, out):
+    """:func:`tet_volume_ratios` on numba's threads (the same bits: each tet is independent)."""
+    for e in numba.prange(tets.shape[1]):
         i0, i1, i2, i3 = tets[0, e], tets[1, e], tets[2, e], tets[3, e]
         a00 = p[i1, 0] - p[i0, 0]
         a10 = p[i1, 1] - p[i0, 1]

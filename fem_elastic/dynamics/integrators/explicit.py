@@ -81,6 +81,7 @@ from __future__ import annotations
 import logging
 import math
 import numbers
+from typing import Any
 
 import numpy as np
 
@@ -121,6 +122,58 @@ _CEIL_SLACK = 1e-9
 #: The largest ``max_substeps`` accepted: sub-steps of one step, a finite bound.
 MAX_SUBSTEPS = 1_000_000
 
+
+class _Work:
+    """What the steps on one model reuse: the inverse lumped mass, held DOFs, a force buffer.
+
+    Built at the first step on a model and kept while the integrator steps
+    that model (a Model is immutable, so nothing here goes stale). The held
+    DOFs are cached only when no driven boundary may change them
+    (``free`` is None otherwise, and every step asks the model).
+    """
+
+    def __init__(self, model):
+        self.model = model
+        self.inv_mass = 1.0 / model.lumped_mass
+        self.buffer = np.empty(model.ndofs)  # the force / acceleration
+        self.x_next = np.empty(model.ndofs)  # a step's x1 and v1, which State copies
+        self.v_next = np.empty(model.ndofs)
+        if model.driven:
+            self.free = self.held = self.x_held = self.v_held = None
+        else:
+            self.held, self.x_held, self.v_held = model.constraints(0.0)
+            self.free = np.ones(model.ndofs, dtype=bool)
+            self.free[self.held] = False
+
+    def gradient(self, x, out=None):
+        """dPi/dx at x (N), as ``model.gradient(x)`` (the same bits); into ``out`` if given.
+
+        The body's fused kernel writes straight into ``out``; loads and
+        contacts, if any, are added to it as :meth:`Model.gradient` does.
+        """
+        model = self.model
+        if out is None:
+            return model.gradient(x)
+        body = model.body_potential
+        kernels = _fused_kernels_of(body)
+        if kernels is None:
+            out[:] = model.gradient(x)
+            return out
+        kernels.gradient(x, out=out)
+        for term, c in model._scaled_terms(1.0)[1:]:
+            out += c * term.gradient(x)
+        return out
+
+
+def _fused_kernels_of(body):
+    """The fused P1 kernels that compute ``body.gradient`` exactly, or None."""
+    from ...physics.elastic_body import ElasticPotential
+
+    if type(body) is not ElasticPotential:  # a subclass may change its gradient
+        return None
+    return body._fused()
+
+
 class _Explicit(Integrator):
     """Shared: the force, held DOFs, and adaptive sub-stepping from the critical time step.
 
@@ -145,6 +198,16 @@ class _Explicit(Integrator):
     explicit = True
     #: whether a sub-stepped step is judged by the scheme's modified energy (symplectic Euler)
     _modified_energy = False
+    # the settings and the sub-stepping memory (set in __init__ and _forget), for type checkers
+    substep: bool
+    safety: float
+    recheck_every: int
+    max_substeps: int
+    _dt_crit: float | None
+    _h_max: float | None
+    _anchor: tuple[float, ...] | None
+    _gradient: tuple[Any, Any]
+    _workspace: _Work | None
 
     def __init__(self, substep: bool = False, safety: float = 0.8, recheck_every: int = RECHECK_EVERY,
                  max_substeps: int = 1000):
@@ -170,6 +233,12 @@ class _Explicit(Integrator):
         self.max_substeps = int(max_substeps)
         self._forget()
 
+    def __getstate__(self) -> dict:
+        """Pickled without the workspace: buffers the next step on a model rebuilds."""
+        state = self.__dict__.copy()
+        state["_workspace"] = None
+        return state
+
     def __repr__(self) -> str:
         if not self.substep:
             return f"fe.{self.name}()"
@@ -186,6 +255,7 @@ class _Explicit(Integrator):
         self._gradient = (None, None)  # (positions, dPi/dx there): for the next force evaluation
         self._model = None  # the model all this is of (None: the next one stepped, e.g. after a restore)
         self._scale_of = (None, 0.0)  # (model, its load and round-off energy scale): a cache
+        self._workspace = None  # _Work: the model's inverse mass, held DOFs, a force buffer
 
     def checkpoint_state(self, state: State) -> dict:
         """The sub-stepping memory, for a checkpoint at ``state``.
@@ -256,20 +326,47 @@ class _Explicit(Integrator):
         """One step of the scheme from ``state`` by ``h`` (s), ending at time ``t1`` (s)."""
         raise NotImplementedError
 
-    def _acceleration(self, model, x, v, free, stats):
+    def _work(self, model) -> _Work:
+        """The per-model constants and buffers of the steps (rebuilt when the model changes)."""
+        w = self._workspace
+        if w is None or w.model is not model:
+            w = self._workspace = _Work(model)
+        return w
+
+    def _free(self, model, t):
+        """The free-DOF mask at time t: the cached one unless a driven boundary may change it."""
+        w = self._work(model)
+        return w.free if w.free is not None else model.free_at(t)
+
+    def _acceleration(self, model, x, v, free, stats, out=None):
+        """``f(x, v) / m`` on the free DOFs, 0 on the held ones; into ``out`` if given (m/s^2)."""
+        w = self._work(model)
         at, g = self._gradient
         if at is x:  # computed to judge the step that ended at x
-            f = -g
+            f = np.negative(g, out=out)
         else:
-            f = model.gradient(x)
+            f = w.gradient(x, out)
             np.negative(f, out=f)
             stats.gradient_evaluations += 1
         fd = model.damping_force(x, v, "lumped")
         if fd is not None:
             f += fd
-        f /= model.lumped_mass
-        f[~free] = 0.0
+        f *= w.inv_mass  # the cached inverse: within 1 ulp of f / m
+        if free is w.free:
+            f[w.held] = 0.0
+        else:
+            f[~free] = 0.0
         return f
+
+    def _finish(self, model, x, v, t):
+        """As :meth:`Integrator._finish`, with the cached held DOFs where nothing is driven."""
+        w = self._work(model)
+        if w.free is None:
+            return super()._finish(model, x, v, t)
+        x, v = model.respond_contacts(x, v)
+        x[w.held] = w.x_held
+        v[w.held] = w.v_held
+        return State(x, v, t)
 
     def _held(self, model, x, v, t):
         """Copies of x, v with the held DOFs at their prescription at time t, and the free mask."""
@@ -305,6 +402,7 @@ class _Explicit(Integrator):
 
     def _count(self, h) -> int:
         """Sub-steps for a step of h (s) under the sub-step limit in force."""
+        assert self._h_max is not None  # set by _estimate before any sub-step is counted
         if not math.isfinite(self._h_max):
             return 1
         return max(1, math.ceil(h / self._h_max * (1.0 - _CEIL_SLACK)))
@@ -401,7 +499,7 @@ class _Explicit(Integrator):
             self._estimate(model, state, cap)
             fresh = True
         n = self._count(h)
-        reasons = []
+        reasons: list[str] = []
         while True:
             if n > self.max_substeps:
                 after = f" after {len(reasons)} failed attempt(s): {'; '.join(reasons)}" if reasons else ""
@@ -485,8 +583,8 @@ class ExplicitEuler(_Explicit):
     order = 1
 
     def _advance(self, model, state, h, t1, stats):
-        x, v, free = state.x, state.v, model.free_at(state.t)
-        a = self._acceleration(model, x, v, free, stats)
+        x, v, free = state.x, state.v, self._free(model, state.t)
+        a = self._acceleration(model, x, v, free, stats, out=self._work(model).buffer)
         return self._finish(model, x + h * v, v + h * a, t1)
 
     def step_matrix(self, h, omega, zeta=0.0):
@@ -524,12 +622,15 @@ class SymplecticEuler(_Explicit):
     _modified_energy = True
 
     def _advance(self, model, state, h, t1, stats):
-        free = model.free_at(state.t)
-        a = self._acceleration(model, state.x, state.v, free, stats)
-        a *= h
-        a += state.v  # v1, in place of a temporary
-        x1 = state.x + h * a
-        return self._finish(model, x1, a, t1)
+        free = self._free(model, state.t)
+        # in the cached buffers: the new State's own copies of x1 and v1 are the step's only arrays
+        w = self._work(model)
+        a = self._acceleration(model, state.x, state.v, free, stats, out=w.buffer)
+        v1 = np.multiply(a, h, out=w.v_next)
+        v1 += state.v  # v + h a, as before
+        x1 = np.multiply(v1, h, out=w.x_next)
+        x1 += state.x  # x + h v1
+        return self._finish(model, x1, v1, t1)
 
     def step_matrix(self, h, omega, zeta=0.0):
         """One-step map of (q, v) on the modal oscillator; of one sub-step with ``substep``."""
@@ -555,7 +656,7 @@ class Midpoint(_Explicit):
 
     def _advance(self, model, state, h, t1, stats):
         t = state.t
-        x, v, free = state.x, state.v, model.free_at(t)
+        x, v, free = state.x, state.v, self._free(model, t)
         a = self._acceleration(model, x, v, free, stats)
         xm, vm, free_m = self._held(model, x + 0.5 * h * v, v + 0.5 * h * a, t + 0.5 * h)
         am = self._acceleration(model, xm, vm, free_m, stats)
@@ -584,7 +685,7 @@ class RK4(_Explicit):
 
     def _advance(self, model, state, h, t1, stats):
         t = state.t
-        x1, v1, free = state.x, state.v, model.free_at(t)
+        x1, v1, free = state.x, state.v, self._free(model, t)
         a1 = self._acceleration(model, x1, v1, free, stats)
         x2, v2, free2 = self._held(model, x1 + 0.5 * h * v1, v1 + 0.5 * h * a1, t + 0.5 * h)
         a2 = self._acceleration(model, x2, v2, free2, stats)
