@@ -15,6 +15,7 @@ import errno
 import os
 import tempfile
 from pathlib import Path
+from typing import Any
 
 from .errors import WriteFailed
 
@@ -84,7 +85,7 @@ def _atomic_write(path: Path, write) -> Path:
 def write_failed(path, exc: BaseException) -> WriteFailed:
     """The :class:`WriteFailed` for ``path`` after ``exc``: what happened, and what to do."""
     reason = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
-    code = getattr(exc, "errno", None)
+    code: Any = getattr(exc, "errno", None)  # an int, or None for an error without errno
     advice = {errno.ENOSPC: "free some space on that disk or write elsewhere",
               errno.EFBIG: "the file is larger than this process may write (ulimit -f): raise the limit "
                            "or write less (fewer frames)",

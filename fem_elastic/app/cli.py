@@ -36,6 +36,7 @@ import logging
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 __all__ = ["main"]
 
@@ -434,7 +435,7 @@ def _study(args) -> int:
     from ..errors import InvalidParameter
 
     out = _Out(args.quiet)
-    executor = "serial" if args.serial else None
+    executor: Any = "serial" if args.serial else None  # "serial", None (the default) or a dask Client
     client = None
     if args.scheduler is not None:
         address = args.scheduler.strip()
@@ -674,7 +675,7 @@ def _usable_streams() -> None:
                 pass
 
 
-def _one_line(text: str) -> str:
+def _one_line(text: object) -> str:
     return " ".join(part.strip() for part in str(text).splitlines() if part.strip())
 
 

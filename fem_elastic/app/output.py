@@ -29,6 +29,7 @@ import math
 import numbers
 import time
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
@@ -532,7 +533,7 @@ class SeriesWriter(Observer):
     def __enter__(self) -> "SeriesWriter":
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> bool:
+    def __exit__(self, exc_type, exc, tb) -> Literal[False]:
         if self.finished:
             return False
         if exc is None:

@@ -159,8 +159,7 @@ def _run_from_series(series, title: str, color_by: str) -> _Run:
         shown = np.unique(faces)
     summary = getattr(series, "summary", None) or {}
     ground = summary.get("ground")
-    is_plane = isinstance(ground, dict) and ground.get("kind") == "plane"
-    ground_z = float(ground["z"]) if is_plane else None
+    ground_z = float(ground["z"]) if isinstance(ground, dict) and ground.get("kind") == "plane" else None
     return _Run(
         title=title, times=times, points_ref=points_ref, displacement=displacement, faces=faces,
         values=values, association=association, shown=shown, ground_z=ground_z,
@@ -196,8 +195,8 @@ def color_range(values, percentile: float = COLOR_PERCENTILE) -> tuple[float, fl
     >>> color_range([[0.0, 0.0]])
     (0.0, 1.0)
     """
-    finite = [v[np.isfinite(v)] for v in (np.asarray(a, dtype=float).ravel() for a in values)]
-    finite = np.concatenate(finite) if finite else np.empty(0)
+    parts = [v[np.isfinite(v)] for v in (np.asarray(a, dtype=float).ravel() for a in values)]
+    finite = np.concatenate(parts) if parts else np.empty(0)
     if finite.size == 0:
         return 0.0, 1.0
     top = float(np.percentile(finite, percentile))

@@ -246,7 +246,7 @@ def remove_stale_variants(out_dir, keep) -> list[str]:
         The names removed.
     """
     keep = set(keep)
-    removed = []
+    removed: list[str] = []
     if not (Path(out_dir) / "run.json").is_file():  # not a run's directory: nothing there is stale
         return removed
     for p in sorted(Path(out_dir).iterdir()):

@@ -369,20 +369,20 @@ def _run_locked(scene, out_dir, runs, variants, progress, render, checkpoint_eve
         except SceneInterrupted as stop:
             raise SceneInterrupted(stop.outcome, outcomes + [stop.outcome]) from None
         except KeyboardInterrupt:  # outside the time loop: setting up or finishing the series
-            stop = RunOutcome(run.name, out_dir / run.name, "interrupted", (
+            interrupted = RunOutcome(run.name, out_dir / run.name, "interrupted", (
                 f"interrupted while writing its series; `{_resume_command(out_dir)}` continues from "
                 "the checkpoints"), None, 0.0, 0.0, run)
-            raise SceneInterrupted(stop, outcomes + [stop]) from None
+            raise SceneInterrupted(interrupted, outcomes + [interrupted]) from None
     rendered = []
     if render and runs:
         try:
             rendered = render_outputs(out_dir, [o.run_dir for o in outcomes], runs[0].output,
                                       progress=progress)
         except KeyboardInterrupt:
-            stop = RunOutcome("render", out_dir, "interrupted", (
+            interrupted = RunOutcome("render", out_dir, "interrupted", (
                 f"interrupted while rendering; the VTU series are complete: `fem-elastic render "
                 f"{out_dir}` renders them"))
-            raise SceneInterrupted(stop, outcomes) from None
+            raise SceneInterrupted(interrupted, outcomes) from None
     if runs and not runs[0].output.get("vtu", True):
         for o in outcomes:
             _remove_series(o.run_dir)

@@ -32,7 +32,7 @@ from pathlib import Path
 try:
     import tomllib
 except ModuleNotFoundError:  # pragma: no cover - Python < 3.11
-    import tomli as tomllib
+    import tomli as tomllib  # type: ignore[no-redef]  # the same API on Python 3.10
 
 from ..errors import FemElasticError, InvalidParameter
 from ..resources import check_input_file

@@ -134,7 +134,7 @@ def validate_bodies(document: dict) -> dict:
                                          "statics of several bodies with fe.solve_static(fe.MultiBody(...)).")
     _, scene_file = _schema()
     spec = scene_file.check(document, ())
-    names = []
+    names: list[str] = []
     for i, body in enumerate(spec["body"]):
         if body["name"] in names:
             raise Invalid(("body", i, "name"), f'the body name "{body["name"]}" is already used (bodies '
@@ -243,7 +243,8 @@ def build_bodies(scene, name: str):
     terms = {k: v for k, v in scene._terms().items() if k in ("gravity", "ground", "damping", "contact")}
     model = scene._guard(("body",), MultiBody, bodies, **terms)
     if name == MAIN_RUN:
-        integ, ipath = spec["integrator"], ("integrator",)
+        ipath: tuple = ("integrator",)
+        integ = spec["integrator"]
     else:
         i = next(i for i, c in enumerate(spec["compare"]) if c["name"] == name)
         integ, ipath = spec["compare"][i]["integrator"], ("compare", i, "integrator")

@@ -159,7 +159,10 @@ def closest(word: str, choices) -> str | None:
 class Type:
     """A value type of the schema: :meth:`check` converts or raises :class:`Invalid`."""
 
-    label = "value"
+    @property
+    def label(self) -> str:
+        """How the help names the accepted values (subclasses override it)."""
+        return "value"
 
     def check(self, value, path: tuple, unit: str = ""):  # pragma: no cover - abstract
         raise NotImplementedError

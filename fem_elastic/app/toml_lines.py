@@ -13,7 +13,7 @@ import re
 try:
     import tomllib
 except ModuleNotFoundError:  # pragma: no cover - Python < 3.11
-    import tomli as tomllib
+    import tomli as tomllib  # type: ignore[no-redef]  # the same API on Python 3.10
 
 __all__ = ["KeyLines"]
 
@@ -93,6 +93,7 @@ class KeyLines:
                 parts.append(self._string())
             else:
                 m = _BARE_KEY.match(self.text, self.i)
+                assert m is not None  # a TOML key that is not quoted is a bare key (was m.group() on None)
                 parts.append(m.group())
                 self.i = m.end()
             self._skip(False)

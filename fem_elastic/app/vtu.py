@@ -13,6 +13,7 @@ import logging
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
@@ -280,7 +281,9 @@ def _pvd_entries(pvd: Path) -> list[tuple[float, Path]]:
         ) from err
     entries = []
     for ds in root.iter("DataSet"):
-        file, time = ds.get("file"), ds.get("timestep")
+        # None when missing: float(None) and Path / None raise the TypeError caught below.
+        file: Any = ds.get("file")
+        time: Any = ds.get("timestep")
         try:
             entries.append((float(time), pvd.parent / file))
         except (TypeError, ValueError):
@@ -378,7 +381,9 @@ def read_series(run_dir) -> SeriesData:
             "SeriesWriter, the one that contains series.pvd."
         )
     times, disp, vel, cells, files = [], [], [], [], []
-    points_ref = tets = None
+    # Both are set together from the first frame read (and are arrays once `times` is not empty).
+    points_ref: Any = None
+    tets: Any = None
     for time, path in _pvd_entries(pvd):
         frame = _read_frame(path)
         if frame is None:

@@ -109,8 +109,8 @@ class SparsityPattern:
         self.shape = (ndofs, ndofs)
         self.nnz = idx.size
         self._row_of = np.repeat(np.arange(ndofs, dtype=np.int64), np.diff(self.indptr))
-        self._touching_cache = (None, None)
-        self._positions_cache = None
+        self._touching_cache: tuple[int | None, np.ndarray | None] = (None, None)
+        self._positions_cache: tuple[object, np.ndarray | None] | None = None
 
     def owns(self, A) -> bool:
         """Whether the sparse matrix ``A`` was assembled on this pattern."""
@@ -164,7 +164,9 @@ class SparsityPattern:
         key = hash(dofs_mask.tobytes())
         if self._touching_cache[0] != key:
             self._touching_cache = (key, dofs_mask[self._row_of] | dofs_mask[self.indices])
-        return self._touching_cache[1]
+        mask = self._touching_cache[1]
+        assert mask is not None  # set above whenever the key changed from None
+        return mask
 
 
 class Discretization:

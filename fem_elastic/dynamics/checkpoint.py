@@ -504,7 +504,7 @@ class Checkpointer:
         k, nf, nc = snapshot.step, snapshot.n_frames, snapshot.n_cuts
         new_frames = _record_bytes(frames[self.n_frames:nf])
         self._append_bytes(d / FRAMES_NAME, self.n_frames * self.frame_size * 8, new_frames)
-        rows = np.column_stack([np.asarray(stats[name][self.last_step:k], dtype=float)
+        rows: np.ndarray | list = np.column_stack([np.asarray(stats[name][self.last_step:k], dtype=float)
                                 for name in STEP_FIELDS]) if k > self.last_step else []
         new_steps = _record_bytes(rows)
         self._append_bytes(d / STEPS_NAME, self.last_step * len(STEP_FIELDS) * 8, new_steps)

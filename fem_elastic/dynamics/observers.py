@@ -98,6 +98,7 @@ import logging
 import math
 import warnings
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -167,7 +168,7 @@ class StepEvent:
     after: State
     last: bool
     record: bool
-    _run: object = None
+    _run: Any = None  # the run (fem_elastic.dynamics.run) that made the event
     _energies: tuple | None = None
 
     def energies(self) -> tuple[float, float, float]:
@@ -205,7 +206,7 @@ class BlowUpWatch(Observer):
         self.e_ref = self.scale = 0.0
         self.work = self.work_abs = 0.0
         self.driving = False
-        self._force = None  # (state, drive force on every DOF (N)) of the last state it was needed at
+        self._force: tuple[State, np.ndarray] | None = None  # (state, drive force on every DOF (N)) of the last state it was needed at
 
     def on_start(self, run) -> None:
         self._force = None
@@ -408,7 +409,7 @@ class CheckpointWriter(Observer):
 
     def __init__(self, checkpointer, watch: BlowUpWatch):
         self.ckpt, self.watch = checkpointer, watch
-        self.snap = None
+        self.snap: _Snapshot | None = None
 
     def _snapshot(self, run, steps_done: int, state) -> _Snapshot:
         return _Snapshot(steps_done, state, len(run.frames), len(run.cuts), self.watch.e_ref,
@@ -425,6 +426,7 @@ class CheckpointWriter(Observer):
 
     def on_finish(self, run) -> None:
         if self.ckpt.last_step < run.n_steps:
+            assert self.snap is not None  # on_start took the first one
             self.snap.wall_time = run.wall_time()
             self.ckpt.write(self.snap, run.frames, run.stats, run.cuts)
 

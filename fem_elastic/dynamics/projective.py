@@ -186,14 +186,14 @@ class ProjectiveDynamics(Integrator):
         self.iterations = _check_int("iterations", iterations, 1)
         if isinstance(tol, bool) or not isinstance(tol, numbers.Real) or not math.isfinite(tol) or tol < 0:
             raise InvalidParameter(f"tol must be a finite number >= 0, got {tol!r}; e.g. tol=1e-6.")
-        self.tol = float(tol)
+        self.tol: float = float(tol)
         if mass not in ("lumped", "consistent"):
             raise InvalidParameter(f"mass must be 'lumped' or 'consistent', got {mass!r}.")
-        self.mass = mass
-        self._model_ref = None  # weak reference to the model the caches below are of
-        self._setup = None
-        self._factors = {}  # (dt, mass, held DOFs) -> (free mask per coordinate, solvers)
-        self._factorizations = 0
+        self.mass: str = mass
+        self._model_ref: weakref.ref | None = None  # weak reference to the model the caches below are of
+        self._setup: _Setup | None = None
+        self._factors: dict[tuple, tuple] = {}  # (dt, mass, held DOFs) -> (free mask per coordinate, solvers)
+        self._factorizations: int = 0
 
     def __repr__(self) -> str:
         return f"fe.ProjectiveDynamics(iterations={self.iterations}, tol={self.tol:g}, mass={self.mass!r})"
@@ -209,6 +209,7 @@ class ProjectiveDynamics(Integrator):
             self._setup = _Setup(model)
             self._factors = {}
             self._model_ref = weakref.ref(model)
+        assert self._setup is not None  # set together with self._model_ref
         return self._setup
 
     def _damping_coefficients(self, model):

@@ -445,8 +445,8 @@ class ShapeMatching(Integrator):
         self.mode, self.beta, self.clusters, self.overlap = _check_settings(mode, beta, clusters, overlap)
         self.alpha = _check_unit("alpha", alpha)
         self.damping = _check_unit("damping", damping, low_open=False)
-        self._model_ref = None  # weak reference to the model the matchers below are of
-        self._matchers = {}  # held nodes (bytes) -> ShapeMatcher: a cache, not a setting
+        self._model_ref: weakref.ref | None = None  # weak reference to the model the matchers below are of
+        self._matchers: dict[bytes, ShapeMatcher] = {}  # held nodes (bytes) -> ShapeMatcher: a cache, not a setting
 
     def __repr__(self) -> str:
         return (f"fe.ShapeMatching(mode={self.mode!r}, beta={self.beta:g}, alpha={self.alpha:g}, "
@@ -460,9 +460,9 @@ class ShapeMatching(Integrator):
         """
         if self._model_ref is None or self._model_ref() is not model:
             self._model_ref, self._matchers = weakref.ref(model), {}
-        held = np.zeros(model.ndofs, dtype=bool)
-        held[model.constraints(t)[0]] = True
-        held = held.reshape(-1, 3).all(axis=1)
+        held_dofs = np.zeros(model.ndofs, dtype=bool)
+        held_dofs[model.constraints(t)[0]] = True
+        held = held_dofs.reshape(-1, 3).all(axis=1)
         key = held.tobytes()
         matcher = self._matchers.get(key)
         if matcher is None:

@@ -30,7 +30,8 @@ def _cells(value, n: int, name: str) -> tuple[int, ...]:
     except TypeError:
         raise InvalidParameter(f"{name} must be {n} positive integers, got {value!r}.") from None
     if len(cells) != n or not all(
-        isinstance(c, numbers.Integral) and not isinstance(c, bool) and c > 0 for c in cells
+        isinstance(c, numbers.Integral) and not isinstance(c, bool) and c > 0  # type: ignore[operator]
+        for c in cells
     ):
         raise InvalidParameter(f"{name} must be {n} positive integers, got {value!r}.")
     return tuple(int(c) for c in cells)

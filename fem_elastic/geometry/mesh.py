@@ -741,7 +741,7 @@ def beam_mesh(
         _positive_length("height", height),
     )
     try:
-        cells = tuple(cells)
+        cells = tuple(cells)  # type: ignore[assignment]  # checked to be 3 ints below
     except TypeError:
         raise InvalidParameter(
             f"cells must be 3 positive integers (nx, ny, nz), got {cells!r}."

@@ -184,7 +184,7 @@ def load_mesh(path, *, reorient: bool = False, validate: bool = True) -> MeshTet
     linear = [i for i, t in enumerate(types) if t == "tetra"]
     quadratic = [i for i, t in enumerate(types) if t == "tetra10"]
     counts: dict[str, int] = {}
-    other_volume = []
+    other_volume: list[str] = []
     for block in mio.cells:
         counts[block.type] = counts.get(block.type, 0) + len(block.data)
         dim = getattr(block, "dim", None)

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -242,6 +242,10 @@ class Material:
 
     E: float
     nu: float
+    if TYPE_CHECKING:  # set in __init__ by object.__setattr__; not dataclass fields
+        _mu: float
+        _lam: float
+        _K: float
 
     def __init__(self, E=None, nu=None, *, mu=None, lam=None, K=None):
         c = elastic_constants(E, nu, mu=mu, lam=lam, K=K, who=type(self).__name__)

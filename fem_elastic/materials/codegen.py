@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -315,7 +316,7 @@ def compile_functions(sympy, name: str, header: list[str], inputs: list[tuple], 
     ok = " & ".join(conditions) if conditions else "None"
     lines.append(f"    return ({', '.join(returned)}{',' if returned else ''}), {ok}")
     source = "\n".join(lines) + "\n"
-    namespace = {"numpy": np}
+    namespace: dict[str, Any] = {"numpy": np}
     exec(compile(source, f"<fem_elastic energy: {name}>", "exec"), namespace)  # noqa: S102
     function = namespace[name]
     function.source = source

@@ -61,6 +61,7 @@ import math
 import warnings
 import weakref
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -238,6 +239,18 @@ _CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 class _Compiled:
     """The generated numpy functions of one energy (see :func:`_compile`)."""
 
+    key: tuple  # (form, parameter names) it was compiled for
+    derivation: Any  # the codegen.derive result
+    psi: Any  # the generated functions (codegen.compile_functions)
+    P: Any
+    C: Any
+    PC: Any
+    d1: Any
+    d2: Any
+    zero1: list  # (invariant form) which first / second derivatives vanish identically
+    zero2: list
+    uses: dict[int, set[str]]  # the invariants each derivative order reads
+
 
 def _compiled(psi, form, param_names):
     try:
@@ -325,6 +338,8 @@ class EnergyMaterial(Material):
     energy: object
     form: str
     params: dict
+    if TYPE_CHECKING:  # set in __init__ by object.__setattr__; not a dataclass field
+        _code: _Compiled
 
     def __init__(self, energy, form: str, params: dict):
         object.__setattr__(self, "energy", energy)

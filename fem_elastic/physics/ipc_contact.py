@@ -53,6 +53,7 @@ from __future__ import annotations
 import logging
 import math
 import warnings
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -231,8 +232,10 @@ class BoundIPCContact(Potential):
         self.mu = spec.friction
         self._friction = ipctk.FrictionPotential(spec.epsv) if self.mu > 0 else None
         self._tangential = None
-        self._x_ref = None
-        self._h = None
+        # The lagged friction's reference positions (m) and time step (s): arrays/float once
+        # lag_friction ran; read only while self._tangential is set.
+        self._x_ref: Any = None
+        self._h: Any = None
         start = self._collisions_at(V0)
         if len(start):
             dmin = math.sqrt(float(start.compute_minimum_distance(self.mesh, V0)))  # ipctk: squared

@@ -67,6 +67,7 @@ def _cells(model) -> tuple[np.ndarray, int]:
             "quadratic body from its own model, model.models[b].to_pyvista(x[model.body_slice(b)])."
         )
     if order == 2:
+        assert basis is not None  # order 2 without a basis was refused above
         return np.asarray(basis.element_dofs, dtype=np.int64).T, VTK_QUADRATIC_TETRA
     return np.asarray(model.mesh.t, dtype=np.int64).T, VTK_TETRA
 

@@ -268,6 +268,7 @@ def newton_minimize(
         if gradient is not None and it > 0:  # test convergence before assembling a Hessian
             g = gradient(x)
             gnorm = float(np.linalg.norm(g[free]))
+            assert g_scale is not None  # set at it == 0
             need_hessian = math.isfinite(gnorm) and (gnorm > rtol * g_scale or it < min_iter) \
                 and it < max_iter
         if need_hessian:
@@ -284,6 +285,7 @@ def newton_minimize(
         if it == 0:
             reaction = reaction if math.isfinite(reaction) else 0.0
             g_scale = max(gnorm, reaction) if g_scale is None else max(g_scale, gnorm, reaction)
+        assert g_scale is not None  # set at it == 0
         if gnorm == 0.0 or (gnorm <= rtol * g_scale and it >= min_iter):
             result.converged = True
             result.message = f"||g|| = {gnorm:.3e} N <= {rtol:.1e} * {g_scale:.3e} N"

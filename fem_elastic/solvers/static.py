@@ -39,6 +39,7 @@ import math
 import time
 import warnings
 from dataclasses import dataclass, field
+from typing import Any, cast
 
 import numpy as np
 
@@ -148,7 +149,7 @@ class EquilibriumPoint:
     iterations: int = 0
     min_eigenvalue: float | None = None
     stable: bool | None = None
-    _model: object = field(default=None, repr=False, compare=False)
+    _model: Any = field(default=None, repr=False, compare=False)  # the Model solved
 
     def reaction_force(self, where) -> np.ndarray:
         """Total reaction (N), ``(3,)``, on a boundary name, names, vertex indices or mask.
@@ -265,7 +266,7 @@ class StaticResult(StaticResultView):
     stable: bool | None = None
     buckling_mode: np.ndarray | None = field(default=None, repr=False)
     perturbations: int = 0
-    _model: object = field(default=None, repr=False, compare=False)
+    _model: Any = field(default=None, repr=False, compare=False)  # the Model solved
 
     def reaction_force(self, where) -> np.ndarray:
         """Total reaction (N), ``(3,)``, on a boundary name, names, vertex indices or mask.
@@ -280,7 +281,8 @@ class StaticResult(StaticResultView):
         [0.0, 0.0, 1.0]
         """
         nodes = self._model.boundary_nodes(where)
-        return self.reaction_dofs.reshape(-1, 3)[nodes].sum(axis=0)
+        # cast: a result without reactions fails here with AttributeError, as it always did
+        return cast(np.ndarray, self.reaction_dofs).reshape(-1, 3)[nodes].sum(axis=0)
 
 
 def _check_steps(steps):

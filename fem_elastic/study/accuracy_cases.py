@@ -117,6 +117,12 @@ def accuracy_cases(quick: bool = False) -> list[Case]:
     >>> sorted({c.params["problem"] for c in cases}) == sorted(PROBLEMS + ("methods",))
     True
     """
+    static_bodies: tuple[str, ...]
+    large_bodies: tuple[str, ...]
+    # (body, order (None: springs), cells, dt / critical dt, steps per period)
+    dyn_combos: list[tuple[str, int | None, tuple[int, int, int], tuple[float, ...], tuple[int, ...]]]
+    lin_n: tuple[int, ...]
+    order: int | None  # the loops below: 1 or 2, None for the springs
     if quick:
         static_bodies = ("springs", "linear", "neo_hookean")
         large_bodies = static_bodies

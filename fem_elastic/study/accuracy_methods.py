@@ -326,7 +326,7 @@ _KNOB_TEXT = {"N": "steps per period", "c": "dt / critical dt", "iterations": "i
 
 def method_series(rows) -> dict:
     """{(scene, method): [rows in the order their knob refines]} of the completed ``methods`` rows."""
-    out = {}
+    out: dict[tuple[str, str], list[dict]] = {}
     for r in rows:
         if r.get("problem") == "methods" and r.get("status") == "ok":
             out.setdefault((r["scene"], r["method"]), []).append(r)

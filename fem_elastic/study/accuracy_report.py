@@ -314,7 +314,7 @@ def write_report(rows, path, *, quick: bool, wall_time: float | None = None, n_r
     from ..files import write_text_atomic
 
     n_ok = sum(r.get("status") == "ok" for r in rows)
-    status = {}
+    status: dict[str | None, int] = {}
     for r in rows:
         status[r.get("status")] = status.get(r.get("status"), 0) + 1
     out = ["# Accuracy study: error against run time", ""]

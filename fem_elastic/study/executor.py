@@ -309,7 +309,7 @@ def read_results(out_dir) -> list[dict]:
     if not path.exists():
         return []
     rows, _ = _parse_lines(path.read_text(encoding="utf-8", errors="replace"), path)
-    by_id = {}
+    by_id: dict[str, dict] = {}
     for row in rows:
         by_id.pop(row["id"], None)  # keep finishing order, later duplicate wins
         by_id[row["id"]] = row
@@ -504,7 +504,8 @@ def run_sweep(cases, fn, out_dir, *, executor=None, workers=None, progress=True,
     path = out_dir / RESULTS_FILE
     _repair(path)
     by_id = {c.id: c for c in cases}
-    done, changed = {}, 0
+    done: dict[str, dict] = {}
+    changed = 0
     for row in read_results(out_dir):
         case = by_id.get(row["id"])
         if case is None:

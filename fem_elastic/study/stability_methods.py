@@ -34,6 +34,7 @@ diagonal): a bounded, finite run is stable whatever the model's energy says.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -46,7 +47,7 @@ __all__ = ["METHODS", "METHOD_SCENES", "DISPLACEMENT_LIMIT", "method_cases", "me
            "method_scene", "methods_matrix", "methods_report_lines"]
 
 #: The methods, by label: (class name in ``fem_elastic.dynamics``, keyword settings).
-METHODS = {
+METHODS: dict[str, tuple[str, dict[str, Any]]] = {
     "Trapezoid": ("Trapezoid", {}),
     "VelocityVerlet": ("VelocityVerlet", {}),
     "PBD": ("PBD", {"stiffness": 1.0, "iterations": 10}),
@@ -136,7 +137,7 @@ def run_method_case(params: dict, simulate_scene) -> dict:
 
 def methods_matrix(rows) -> dict:
     """{scene: {method: row}} of the ``methods`` rows."""
-    out = {}
+    out: dict[str, dict] = {}
     for r in rows:
         if r.get("kind") == "methods":
             out.setdefault(r["case"], {})[r["integrator"]] = r

@@ -59,7 +59,7 @@ def largest_stable_dt(rows) -> dict:
     >>> largest_stable_dt(rows)[("RK4", "linear", 1e7, 0.3)]["dt"]
     0.001
     """
-    groups = {}
+    groups: dict[tuple, list[dict]] = {}
     for r in rows:
         if r.get("kind") == "sweep":
             groups.setdefault(_point(r), []).append(r)
@@ -130,7 +130,7 @@ def extreme_matrix(rows) -> dict:
     dict
         ``(case, body) -> {column: row}``.
     """
-    out = {}
+    out: dict[tuple[str, str], dict[str, dict]] = {}
     for r in rows:
         if r.get("kind") == "extreme":
             out.setdefault((r["case"], r["body"]), {})[_column(r)] = r
@@ -229,19 +229,19 @@ def conclusions(rows) -> list:
     for integ in INTEGRATORS:
         if integ in EXPLICIT:
             continue
-        pts = {k: v for k, v in stable_dt.items() if k[0] == integ}
-        if not pts:
+        at = {k: v for k, v in stable_dt.items() if k[0] == integ}
+        if not at:
             continue
-        clean = [k for k, v in pts.items() if not v["failures"]]
-        text = f"{integ}: stable at every dt of the sweep on {len(clean)} of {len(pts)} (body, E, nu)"
-        bad = sorted((k for k in pts if pts[k]["failures"]), key=lambda k: (k[1], k[2], k[3]))
+        clean = [k for k, v in at.items() if not v["failures"]]
+        text = f"{integ}: stable at every dt of the sweep on {len(clean)} of {len(at)} (body, E, nu)"
+        bad = sorted((k for k in at if at[k]["failures"]), key=lambda k: (k[1], k[2], k[3]))
         if bad:
             text += "; not on " + "; ".join(
-                f"{_where(k)} ({', '.join(f'{v} at dt={_dt_label(dt)}' for dt, v, _ in pts[k]['failures'])})"
+                f"{_where(k)} ({', '.join(f'{v} at dt={_dt_label(dt)}' for dt, v, _ in at[k]['failures'])})"
                 for k in bad)
         out.append(text + ".")
     matrix = extreme_matrix(rows)
-    tally = {}
+    tally: dict[str, tuple[int, int]] = {}
     for (case, body), v in matrix.items():
         for col, r in v.items():
             if _verdict(r) != "rejected":

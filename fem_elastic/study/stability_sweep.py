@@ -127,6 +127,7 @@ def study_cases(quick: bool = False) -> list:
     """
     sweep, critical, extreme = [], [], []
     for integ in INTEGRATORS:
+        dts: tuple[float, ...]
         if integ in EXPLICIT:
             dts = _QUICK_DT_EXPLICIT if quick else _DT_EXPLICIT
         else:

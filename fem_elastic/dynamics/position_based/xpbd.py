@@ -184,7 +184,7 @@ class XPBD(PositionBased):
             raise InvalidParameter(f"consistent_lame must be True or False, got {consistent_lame!r}.")
         self.constraints = constraints
         self.consistent_lame = bool(consistent_lame)
-        self._warned = set()
+        self._warned: set[tuple[int, float]] = set()
 
     def __repr__(self) -> str:
         return (f"fe.XPBD(iterations={self.iterations}, constraints={self.constraints!r}, "
