@@ -89,6 +89,8 @@ def test_readme_meshes_and_scripts_exist():
     # every file the README names for the user to open or run is in the repository
     named = r"(?<![\w/.])((?:meshes|scenes|scripts|notebooks|examples|docs)/[\w./-]+\.\w+)"
     for path in set(re.findall(named, README)):
+        if path.startswith("docs/_build/"):  # what the README's docs build command writes
+            continue
         assert (ROOT / path).exists(), f"README names {path}, which is not in the repository"
     import fem_elastic as fe
 

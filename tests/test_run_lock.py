@@ -53,7 +53,10 @@ render = []
 #: a process that takes the lock on argv[1] with RunLock, says so, and holds it until killed or
 #: interrupted (Ctrl-C: the `with` block releases it on the way out)
 HOLDER = textwrap.dedent("""
-    import sys, time
+    import signal, sys, time
+    # Ctrl-C raises KeyboardInterrupt as in a terminal, also when the test run itself was started
+    # in the background by a non-interactive shell (which leaves SIGINT ignored for children)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     from fem_elastic.app.run_lock import RunLock
     with RunLock(sys.argv[1]):
         try:  # "locked" is said inside the try: a Ctrl-C right after it is still caught here

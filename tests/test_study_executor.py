@@ -155,6 +155,9 @@ def test_ctrl_c_stops_a_process_pool_at_once(tmp_path):
     # a real SIGINT (Ctrl-C) to this process only, as a terminal's would reach it; the fast cases
     # finish well within the 2 s
     timer = threading.Timer(2.0, os.kill, (os.getpid(), signal.SIGINT))
+    # Python's own Ctrl-C handler, as in a terminal: a test run started in the background by a
+    # non-interactive shell inherits SIGINT ignored, and then no KeyboardInterrupt comes at all
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     t0 = time.perf_counter()
     timer.start()
     try:
@@ -162,6 +165,7 @@ def test_ctrl_c_stops_a_process_pool_at_once(tmp_path):
             run_sweep(cases, nap, tmp_path, workers=2, progress=False)
     finally:
         timer.cancel()
+        signal.signal(signal.SIGINT, previous)
     assert time.perf_counter() - t0 < 15.0
     assert sorted(r["id"] for r in read_results(tmp_path)) == ["fast/0", "fast/1"]
 
