@@ -33,7 +33,7 @@ import fem_elastic as fe  # noqa: E402
 project = "fem_elastic"
 author = "the fem_elastic developers"
 copyright = "the fem_elastic developers, BSD-3-Clause"
-release = getattr(fe, "__version__", "0.1.0")
+release = fe.__version__
 version = release
 
 extensions = [
@@ -48,8 +48,7 @@ extensions = [
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 root_doc = "index"
-exclude_patterns = ["_build", "demo.png", "_gallery.py", "gallery/*.ipynb", "gallery/*.py.md5",
-                    "gallery/*.codeobj.json", "gallery/*.zip"]
+exclude_patterns = ["_build"]   # Sphinx reads only .rst and .md files (source_suffix)
 suppress_warnings = ["myst.header"]
 myst_heading_anchors = 3
 

@@ -30,13 +30,13 @@ runs = {built.name: built for built in scene.build()}
 
 # %%
 # Each variant's model also has a static answer, the rest state the damping settles to.
-L, EI = 1.0, 1e7 * 0.1**4 / 12                      # m, N m^2
-P = 1.0e3 * 0.1 * 0.1                                # N: the 1 kPa traction on the end face
-euler_bernoulli = P * L**3 / (3 * EI)
+beam = fe.RectangularCantilever(length=1.0, width=0.1, height=0.1, E=1e7, nu=0.25)  # the scene's
+P = 1.0e3 * beam.area                                # N: the 1 kPa traction on the end face
+euler_bernoulli = beam.tip_load_euler_bernoulli(P)   # P L^3 / (3 E I), m
 steps = 15 if QUICK else None                        # quick: the first 0.3 s of the 2 s
 trajectories, statics = {}, {}
 for name, built in runs.items():
-    tip = built.model.mesh.p[0] > L - 1e-9
+    tip = built.model.mesh.p[0] > beam.length - 1e-9
     statics[name] = -fe.solve_static(built.model).displacement[tip, 2].mean()
     traj = built.simulate(steps=steps) if steps else built.simulate()
     trajectories[name] = (traj.times, -traj.displacement[:, tip, 2].mean(axis=1))

@@ -45,10 +45,10 @@ from .app import (
     write_summary,
     write_vtu_frame,
 )
-from .dynamics.contact_watch import ContactIntersectionWarning
 from .dynamics import (
     RK4,
     Checkpoint,
+    ContactIntersectionWarning,
     ExplicitEuler,
     ImplicitEuler,
     Integrator,
@@ -110,11 +110,10 @@ from .materials import (
     material_from_energy,
 )
 from .materials import energy_math as math  # noqa: F401  (fe.math; not in __all__: never shadows the stdlib)
-from .physics.body import Body
-from .physics.multibody import MultiBody
-from .physics.broad_phase import BoundingSpheres
-from .physics.impulse_contact import BoundImpulseContact, ImpulseContact, RestContactWarning, collide_particles
 from .physics import (
+    Body,
+    BoundImpulseContact,
+    BoundingSpheres,
     BoundIPCContact,
     CollisionSurface,
     IPCContact,
@@ -124,22 +123,26 @@ from .physics import (
     ElasticBody,
     ElasticPotential,
     Ground,
+    ImpulseContact,
     LinearPotential,
     MassSpring,
     MixedPotential,
     Model,
+    MultiBody,
     Motion,
     Obstacle,
     Potential,
     Prescribed,
     Rayleigh,
     RectangularCantilever,
+    RestContactWarning,
     Sphere,
     SpringPotential,
     Translate,
     Twist,
     WarpedStiffness,
     cell_fields,
+    collide_particles,
     elastica_tip,
     lloyd_stiffness,
     van_gelder_stiffness,
@@ -201,20 +204,23 @@ __all__ = [
 _compat.install()
 
 
+#: public names imported on first use, as (module, attribute; None: the module itself):
+#: fe.study pulls in the runner's and the studies' code, fe.render (public since issue 20) pyvista
+_LAZY = {
+    "study": (".study", None),
+    "render": (".app.render", None),
+    "render_runs": (".app.render", "render_runs"),
+    "render_frame": (".app.render", "render_frame"),
+}
+
+
 def __getattr__(name: str):
-    # fe.study is imported on first use: it pulls in the runner's and the studies' code
-    if name == "study":
+    if name in _LAZY:
         import importlib
 
-        return importlib.import_module(".study", __name__)
-    if name == "render":  # public since issue 20: the rendering module, imported on first use
-        import importlib
-
-        return importlib.import_module(".app.render", __name__)
-    if name in ("render_runs", "render_frame"):  # fe.render_runs(...), fe.render_frame(...)
-        import importlib
-
-        return getattr(importlib.import_module(".app.render", __name__), name)
+        module_name, attribute = _LAZY[name]
+        module = importlib.import_module(module_name, __name__)
+        return module if attribute is None else getattr(module, attribute)
     if name in _compat.MOVED:  # fe.mesh, fe.analytic, ...: the modules' old places
         return _compat.moved_module(name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -230,13 +230,14 @@ def check_input_file(path, max_bytes: int, what: str = "input file") -> Path:
         Not a regular file, or larger than ``max_bytes``.
     """
     path = Path(path)
-    mode = os.stat(path).st_mode  # follows links: what would be read
+    st = os.stat(path)  # follows links: what would be read
+    mode = st.st_mode
     if not stat.S_ISREG(mode):
         kind = ("a directory" if stat.S_ISDIR(mode) else "a FIFO (named pipe)" if stat.S_ISFIFO(mode)
                 else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
                 else "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
         raise InvalidParameter(f"the {what} {str(path)!r} is {kind}, not a file; give the path of a file.")
-    size = os.stat(path).st_size
+    size = st.st_size
     if size > max_bytes:
         raise InvalidParameter(
             f"the {what} {str(path)!r} is {format_bytes(size)}, more than the {format_bytes(max_bytes)} such a "

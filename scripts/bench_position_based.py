@@ -30,34 +30,14 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import statistics
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-
-def interleaved(fns, repeats):
-    """{label: median s}, the functions called in turn ``repeats`` times."""
-    times = {label: [] for label in fns}
-    for _ in range(repeats):
-        for label, fn in fns.items():
-            t0 = time.perf_counter()
-            fn()
-            times[label].append(time.perf_counter() - t0)
-    return {k: statistics.median(v) for k, v in times.items()}
-
-
-def bent_state(X: np.ndarray) -> np.ndarray:
-    """A cantilever bending shape of the 1 m beam (tip deflection 0.1 m), as bench_step.py."""
-    L, zc, w_tip = 1.0, 0.05, 0.1
-    Xp = X.reshape(-1, 3)
-    s = Xp[:, 0] / L
-    w = w_tip * s**2 * (3.0 - s) / 2.0
-    slope = w_tip * 3.0 * s * (2.0 - s) / (2.0 * L)
-    u = np.zeros_like(Xp)
-    u[:, 2] = -w
-    u[:, 0] = (Xp[:, 2] - zc) * slope
-    return X + u.ravel()
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_step import bent_state, interleaved  # the same bent beam, the same round-robin timing
 
 
 def main(argv=None):
@@ -139,7 +119,7 @@ def run(cells, repeats):
     for name, (a, b) in integrators.items():
         fns[f"{name}: step, {n1} iterations"] = (lambda a=a, h=dts[name]: a.step(model, state, h))
         fns[f"{name}: step, {n2} iterations"] = (lambda b=b, h=dts[name]: b.step(model, state, h))
-    rows = interleaved(fns, repeats)
+    rows = {label: median for label, (median, _, _) in interleaved(fns, repeats).items()}
     ms = 1e3
     print("\nstep sizes: " + ", ".join(f"{k} {v:.3g} s" for k, v in dts.items())
           + " (the Neo-Hookean constraints at h omega_max = 2)")

@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_step import bent_state
+from bench_step import bent_state, interleaved
 
 
 def main(argv=None):
@@ -61,21 +61,6 @@ def main(argv=None):
 
     with threadpool_limits(limits=1):
         run(cells, max(5, args.repeats), args.accuracy)
-
-
-def interleaved(fns, repeats):
-    """{label: (median s, min s)}, the functions called in turn ``repeats`` times.
-
-    Round-robin, as in ``bench_step.py``: a change of load on a shared machine during the
-    run falls on both timings alike.
-    """
-    times = {label: [] for label in fns}
-    for _ in range(repeats):
-        for label, fn in fns.items():
-            t0 = time.perf_counter()
-            fn()
-            times[label].append(time.perf_counter() - t0)
-    return {k: (statistics.median(v), min(v)) for k, v in times.items()}
 
 
 def run(cells, repeats, accuracy):
@@ -121,7 +106,7 @@ def run(cells, repeats, accuracy):
         nstats.append(newton.last_stats)
 
     rows = interleaved({"pd": pd_iteration, "newton": newton_iteration}, repeats)
-    (t_pd, t_pd_min), (t_newton, t_newton_min) = rows["pd"], rows["newton"]
+    (t_pd, t_pd_min, _), (t_newton, t_newton_min, _) = rows["pd"], rows["newton"]
     local = statistics.median(s["linearize"] for s in stats)
     solve = statistics.median(s["solve"] for s in stats)
     assert pd.factorizations == 1

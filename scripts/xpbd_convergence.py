@@ -37,7 +37,6 @@ G = (0.0, 0.0, -9.81)
 
 
 def _run(model, integrator, dt, steps):
-    s = None
     import fem_elastic as fe
 
     s = fe.State.rest(model)

@@ -26,7 +26,7 @@ import numpy as np
 
 import fem_elastic as fe
 
-__all__ = ["BadInput", "BAD_INPUTS", "START_MARKER", "END_MARKER", "markdown_table", "outcome_name"]
+__all__ = ["BadInput", "BAD_INPUTS", "START_MARKER", "END_MARKER", "markdown_table", "outcome_name", "cracked_beam"]
 
 START_MARKER = "<!-- bad-inputs:start -->"
 END_MARKER = "<!-- bad-inputs:end -->"
@@ -357,17 +357,25 @@ def _disk_full(tmp):
     return _with_env("FEM_ELASTIC_DISK_LIMIT", "1K", lambda: run_scene(scene, Path(tmp) / "out", render=False))
 
 
+def cracked_beam(cells, layer):
+    """A unit-length beam whose vertices on the plane x = layer / cells[0] are duplicated for the
+    tets beyond it (a hidden crack): ``(points, tets, number of duplicated vertices)``."""
+    mesh = fe.beam_mesh(length=1.0, cells=cells)
+    p, t = mesh.p.T.copy(), mesh.t.T.copy()
+    x0 = layer / cells[0]
+    on = np.flatnonzero(np.isclose(p[:, 0], x0))
+    beyond = p[t].mean(axis=1)[:, 0] > x0
+    tb = t[beyond]
+    for i, v in enumerate(on):
+        tb[tb == v] = len(p) + i
+    t[beyond] = tb
+    return np.vstack([p, p[on]]), t, on.size
+
+
 def _cracked_mesh():
     """The 2-cell beam cut at x = 0.5: the right cell's tets get their own copies of the plane's 4 vertices."""
-    mesh = _mesh()
-    p, t = mesh.p.T.copy(), mesh.t.T.copy()
-    on = np.flatnonzero(np.isclose(p[:, 0], 0.5))
-    right = p[t].mean(axis=1)[:, 0] > 0.5
-    tr = t[right]
-    for i, v in enumerate(on):
-        tr[tr == v] = len(p) + i
-    t[right] = tr
-    return fe.mesh_from_arrays(np.vstack([p, p[on]]), t)
+    points, tets, _ = cracked_beam((2, 1, 1), 1)
+    return fe.mesh_from_arrays(points, tets)
 
 
 def _loose_piece(tmp):

@@ -34,8 +34,7 @@ def test_pcg_stops_at_negative_curvature_with_a_descent_iterate():
     # shift -1 puts eigenvalues in (-1, 3): indefinite
     A = _laplacian(200, shift=-1.0)
     b = np.random.default_rng(1).standard_normal(200)
-    x, its, ok, neg = preconditioned_cg(A, b, sp.identity(200), 1e-10, 1000,
-                                        stop_at_negative_curvature=True)
+    x, its, ok, neg = preconditioned_cg(A, b, sp.identity(200), 1e-10, 1000)
     assert neg and not ok
     # every CG iterate before the negative curvature lowers the quadratic model from 0
     assert 0.5 * x @ (A @ x) - b @ x <= 0.0
@@ -61,6 +60,7 @@ def test_reused_hierarchy_serves_a_nearby_tangent_and_is_rebuilt_for_a_far_one()
     near = amg.solve(K * 1.01, b, B)
     assert near.setups == 0 and amg.setups == 1
     assert near.iterations <= 2 * first.iterations
+    # CG stops on its updated residual, which drifts from b - A x by round-off: 10x rtol
     assert np.linalg.norm(b - 1.01 * (K @ near.x)) <= 10 * 1e-8 * np.linalg.norm(b)
     # a very different matrix (mass-dominated, as at a tiny dt): CG on the old hierarchy goes
     # past its limit and the hierarchy is rebuilt; the answer still meets the tolerance
@@ -124,12 +124,10 @@ def test_indefinite_exact_tangent_is_projected_without_a_thrown_away_solve(monke
     monkeypatch.setattr(static, "newton_minimize", recording)
     out = fe.solve_static(model, linear_solver=fe.AMGSolver())
     assert out.converged
-    projected = 0
     for res, calls in runs:
         # a projected linearization at the very iterate of an exact one: the projection
         after_exact = sum(1 for (pa, xa), (pb, xb) in zip(calls, calls[1:])
                           if not pa and pb and np.array_equal(xa, xb))
-        projected += after_exact
         assert res.linear_solves == res.iterations + after_exact
         assert res.linear_setups <= 1 + res.linear_solves // 3  # reuse, rebuilds aside
     # (whether this load path meets an indefinite exact tangent depends on the load steps;

@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 
 import fem_elastic as fe
 from fem_elastic.dynamics.checkpoint import CHECKPOINT_NAME, CUTS_NAME, FRAMES_NAME, STEPS_NAME
+from small_scene import small_scene
 
 
 def _model():
@@ -106,31 +107,7 @@ def test_a_cuts_file_in_another_encoding_is_a_typed_error(tmp_path):
         fe.load_checkpoint(d)
 
 
-SCENE = """\
-[scene]
-name = "ck"
-[mesh]
-kind = "beam"
-cells = [2, 1, 1]
-[body]
-name = "fem"
-material = "linear"
-E = 1e5
-nu = 0.3
-density = 1000.0
-[boundary]
-fixed = ["left"]
-[loads]
-gravity = [0.0, 0.0, -9.81]
-[integrator]
-type = "implicit_euler"
-[time]
-dt = 0.01
-duration = 0.04
-[output]
-render = []
-checkpoint_every = 2
-"""
+SCENE = small_scene("ck", duration=0.04, output="checkpoint_every = 2")
 
 
 def _run(tmp_path):

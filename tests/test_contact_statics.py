@@ -53,6 +53,10 @@ def test_contact_between_bodies_only_uses_the_native_filter():
             [fe.Body(_cube(), 1000.0, _material(), name="a"),
              fe.Body(_cube(), 1000.0, _material(), name="b", translate=(SIZE + gap, 0, 0))],
             contact=fe.IPCContact(dhat=1e-3, kappa=1e6, self_contact=False))
+    # the filter itself: two vertices of one body never collide, a vertex of each body may
+    same = np.flatnonzero(bodies.contact.surface.body == 0)[:2]
+    other = np.flatnonzero(bodies.contact.surface.body == 1)[0]
+    assert not bodies.contact.mesh.can_collide(*same) and bodies.contact.mesh.can_collide(same[0], other)
     dx = np.zeros(bodies.ndofs)
     view = dx[bodies.body_slice("b")]
     view[0::3] = -0.05  # body b driven 5 cm into body a: CCD must stop it at the gap

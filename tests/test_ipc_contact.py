@@ -291,6 +291,10 @@ def test_block_on_incline_slides_with_coulomb_acceleration():
     vx = _incline(theta, mu, steps=25, dt=dt)
     a = np.polyfit(dt * np.arange(10, 25), vx[10:], 1)[0]  # after the block has settled
     expected = 9.81 * (np.sin(theta) - mu * np.cos(theta))
+    # measured 0.13 % off: IPC's friction is Coulomb's only above the smoothing speed epsv
+    # (1e-4 m/s, against ~0.2 m/s here) and the barrier lets the block bob on the slab after the
+    # landing; 2 % is the margin for those, while a friction force 2 % off would shift a by
+    # 0.02 mu g cos(theta) = 0.05 m/s^2, i.e. by 2.2 % of the expected 2.36 m/s^2
     assert a == pytest.approx(expected, rel=0.02)
 
 

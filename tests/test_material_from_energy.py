@@ -114,13 +114,14 @@ def make(name):
 
 # -- derivatives against finite differences ----------------------------------------------------
 # F is O(1): h = 1e-6 has truncation ~ h^2 S / ell^3 and round-off ~ eps S / h, i.e. ~1e-10 S
-# relative to the stress scale S ~ STIFF at the most compressed point (ell ~ 0.4). 1e-6 S is a
-# 1e4 margin; a wrong term is an error of the size of the derivative itself.
+# relative to the scale S of the differentiated quantity at the most compressed point (ell ~ 0.4);
+# measured: <= 6e-10 STIFF for the stress. 1e-6 S is a >1e3 margin; a wrong term is an error of
+# the size of the derivative itself.
 @pytest.mark.parametrize("name", list(ENERGIES))
 def test_stress_is_the_gradient_of_the_energy(name):
     m = make(name)
     F = sample_F(1)
-    np.testing.assert_allclose(m.dpsi_dF(F), fd_gradient(m.psi, F), rtol=0, atol=1e-6 * STIFF * 10)
+    np.testing.assert_allclose(m.dpsi_dF(F), fd_gradient(m.psi, F), rtol=0, atol=1e-6 * STIFF)
 
 
 @pytest.mark.parametrize("name", list(ENERGIES))
@@ -129,7 +130,9 @@ def test_tangent_is_the_gradient_of_the_stress(name):
     F = sample_F(2)
     C = m.d2psi_dF2(F)
     C_fd = np.moveaxis(fd_gradient(m.dpsi_dF, F), (0, 1), (2, 3))
-    # the exponential energy reaches ~1e5 STIFF at the most stretched point: relative there
+    # the stress differentiated here is S ~ 10 STIFF (|C| reaches 20-30 STIFF at the most compressed
+    # point): 1e-6 S as above. The exponential energy reaches ~1e5 STIFF at the most stretched
+    # point: relative there
     np.testing.assert_allclose(C, C_fd, rtol=1e-8, atol=1e-6 * STIFF * 10)
     np.testing.assert_allclose(C, np.moveaxis(C, (0, 1), (2, 3)), rtol=1e-14, atol=1e-9 * STIFF)
     P, C2 = m.stress_and_tangent(F)
@@ -179,7 +182,7 @@ def test_equal_to_the_hand_written_material(psi, cls):
     F = np.concatenate([sample_F(3), I3[:, :, None] + 0.4 * rng.standard_normal((3, 3, 200))], axis=-1)
     if cls is fe.NeoHookean:
         F = F[..., np.linalg.det(np.moveaxis(F, -1, 0)) > 0.05]
-    F = F.reshape(3, 3, -1, 2)[..., :]  # a (nelems, nqp) batch
+    F = F.reshape(3, 3, -1, 2)  # a (nelems, nqp) batch
     for method in ("psi", "dpsi_dF", "d2psi_dF2", "d2psi_dF2_psd"):
         a, b = getattr(m, method)(F), getattr(ref, method)(F)
         assert a.shape == b.shape
@@ -386,6 +389,8 @@ def test_project_psd_9x9_clamps_only_negative_eigenvalues():
     for k in range(5):
         w, Q = np.linalg.eigh(A[..., k])
         ref = (Q * np.maximum(w, 0)) @ Q.T
+        # entries O(1-10): two eigen-decompositions agree to ~1e-15 |A|; a kept negative
+        # eigenvalue (or a clamped positive one) is an O(1) error
         np.testing.assert_allclose(out.reshape(9, 9, 5)[..., k], ref, atol=1e-12)
 
 

@@ -27,6 +27,8 @@ def sample_F():
 def test_the_three_pairs_give_the_same_material(cls):
     a, b, c = cls(E=E, nu=NU), cls(mu=MU, lam=LAM), cls(mu=MU, K=K)
     F = sample_F()
+    # each conversion is a few flops without cancellation at nu = 0.4 (measured: <= 2.3e-16);
+    # 1e-14 and 1e-13 are margins over round-off, a wrong formula is an O(1) error.
     for m in (b, c):
         assert m.mu == pytest.approx(a.mu, rel=1e-14) and m.lam == pytest.approx(a.lam, rel=1e-13)
         assert m.E == pytest.approx(E, rel=1e-14) and m.nu == pytest.approx(NU, rel=1e-14)
@@ -98,12 +100,31 @@ def test_anything_but_one_valid_pair_is_invalid(cls, kwargs, match):
         cls(**kwargs)
 
 
+def test_projective_corotated_takes_the_pairs_too():
+    """Its own __init__ (the volume band) passes the pair on to Material's."""
+    band = dict(sigma_min=0.9, sigma_max=1.1)
+    a = fe.ProjectiveCorotated(E=E, nu=NU, **band)
+    F = sample_F()
+    for m in (fe.ProjectiveCorotated(mu=MU, lam=LAM, **band), fe.ProjectiveCorotated(mu=MU, K=K, **band)):
+        assert (m.sigma_min, m.sigma_max) == (0.9, 1.1)
+        for method in ("psi", "dpsi_dF", "d2psi_dF2_psd"):  # tolerances as in the test above
+            np.testing.assert_allclose(getattr(m, method)(F), getattr(a, method)(F), rtol=1e-12,
+                                       atol=1e-12 * E)
+    m = fe.ProjectiveCorotated(mu=3.0e5, lam=1.1e6, sigma_min=0.9)
+    assert (m.mu, m.lam) == (3.0e5, 1.1e6)
+    assert repr(m) == "ProjectiveCorotated(mu=300000.0, lam=1100000.0, sigma_min=0.9, sigma_max=1.0)"
+    with pytest.raises(fe.InvalidParameter, match="got E and lam: give " + PAIRS):
+        fe.ProjectiveCorotated(E=E, lam=LAM)
+
+
 def test_elastic_constants_round_trip():
+    # round trips through a few flops, without severe cancellation at these nu (lam + mu >= mu/2,
+    # 3K + mu >= mu): measured <= 2.3e-16, so 1e-12 everywhere is a margin over round-off.
     for E_, nu in [(1e6, 0.3), (2e11, -0.5), (5e3, 0.4999)]:
         c = elastic_constants(E_, nu)
         assert c.given == ("E", "nu") and (c.E, c.nu) == (E_, nu)
         for back in (elastic_constants(mu=c.mu, lam=c.lam), elastic_constants(mu=c.mu, K=c.K)):
-            assert math.isclose(back.E, E_, rel_tol=1e-12) and math.isclose(back.nu, nu, rel_tol=1e-10)
+            assert math.isclose(back.E, E_, rel_tol=1e-12) and math.isclose(back.nu, nu, rel_tol=1e-12)
             assert math.isclose(back.lam, c.lam, rel_tol=1e-12) and math.isclose(back.K, c.K, rel_tol=1e-12)
     # an auxetic solid: negative lam is allowed while K > 0
     aux = elastic_constants(mu=1.0, lam=-0.5)
@@ -117,4 +138,6 @@ def test_a_model_built_from_mu_and_lam():
         model = fe.Model(mesh, density=1000.0, body=fe.ElasticBody(material), fixed="left",
                          gravity=(0.0, 0.0, -9.81))
         results.append(fe.solve_static(model).displacement)
+    # MU, LAM are lame_parameters(E, NU) to the last bit (test_e_nu_materials_are_unchanged): the
+    # two models are the same, 1e-10 leaves room for the solver's round-off alone
     np.testing.assert_allclose(results[1], results[0], rtol=0, atol=1e-10 * np.abs(results[0]).max())

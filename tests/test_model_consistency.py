@@ -14,6 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import fem_elastic as fe
+from bad_inputs import cracked_beam
 from fem_elastic.solvers.static import _diagnose_failure
 
 
@@ -49,26 +50,11 @@ def test_a_dof_both_fixed_and_prescribed_is_refused():
         _model(fixed=["left", "right"], displacement={"right": (0.0, 0.0, -0.01)})
 
 
-def _cracked(cells, layer):
-    """A beam whose vertices on the plane x = layer / cells[0] are duplicated for the tets beyond it."""
-    mesh = fe.beam_mesh(length=1.0, cells=cells)
-    p, t = mesh.p.T.copy(), mesh.t.T.copy()
-    x0 = layer / cells[0]
-    on = np.flatnonzero(np.isclose(p[:, 0], x0))
-    beyond = p[t].mean(axis=1)[:, 0] > x0
-    new = {int(v): p.shape[0] + i for i, v in enumerate(on)}
-    t_b = t[beyond]
-    for v, w in new.items():
-        t_b[t_b == v] = w
-    t[beyond] = t_b
-    return np.vstack([p, p[on]]), t, on.size
-
-
 @settings(max_examples=12, deadline=None)
 @given(nx=st.integers(2, 5), ny=st.integers(1, 2), data=st.data())
 def test_coincident_duplicate_vertices_are_refused_with_their_count(nx, ny, data):
     layer = data.draw(st.integers(1, nx - 1))
-    p, t, n_dup = _cracked((nx, ny, 1), layer)
+    p, t, n_dup = cracked_beam((nx, ny, 1), layer)
     with pytest.raises(fe.InvalidMesh, match=rf"^{n_dup} pair\(s\) of vertices coincide.*Merge them") as err:
         fe.mesh_from_arrays(p, t)
     assert err.value.elements.size == 2 * n_dup

@@ -93,6 +93,9 @@ def test_friction_decelerates_a_sliding_block_at_mu_g():
         s = integ.step(model, s, dt)
         vx.append((model.lumped_mass * s.v)[0::3].sum() / model.total_mass)
     decel = (vx[5] - vx[25]) / (20 * dt)
+    # once the block rests, the normal impulse the projections apply per step is its weight times dt,
+    # so the deceleration is mu g to round-off plus the elastic settling (measured -2.4e-5 relative);
+    # 2 % is a margin for the settling of other sweep orders, not a physical bound
     assert decel == pytest.approx(mu * 9.81, rel=0.02)
 
 
@@ -170,10 +173,12 @@ def test_pbd_stiffness_drifts_with_the_time_step_and_the_iterations(per_iteratio
 
     sags = np.array([sag(40, dt) for dt in dts])
     slope = np.polyfit(np.log(dts), np.log(sags), 1)[0]
+    # 2 for one constraint; the mesh's coupled constraints move it (measured 1.98 with k per
+    # iteration, 2.15 with Mueller's k')
     assert 1.8 < slope < 2.3
     fewer = sag(10, 0.01)
-    assert fewer > 1.4 * sags[1]
-    if per_iteration:  # each sweep removes k of what is left: the sag goes as 1 / iterations
+    assert fewer > 1.4 * sags[1]  # measured 1.52 (k') and 4.13 (k per iteration) for 10 against 40 sweeps
+    if per_iteration:  # each sweep removes k of what is left: the sag goes as 1 / iterations, 40 / 10 = 4
         assert fewer / sags[1] == pytest.approx(4.0, rel=0.15)
 
 
@@ -286,3 +291,4 @@ def test_the_benchmark_script_prints_its_ratios():
     assert r.returncode == 0, r.stderr
     assert "one XPBD iteration (Neo-Hookean constraints, Gauss-Seidel sweep)" in r.stdout
     assert "medians of 5" in r.stdout
+

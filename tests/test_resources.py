@@ -26,31 +26,9 @@ from fem_elastic.resources import (
     BYTES_PER_TET, DISK_ENV, MEMORY_ENV, MODEL_BYTES_PER_TET, available_memory, check_input_file, format_bytes,
     model_memory,
 )
+from small_scene import small_scene
 
-SCENE = """\
-[scene]
-name = "res"
-[mesh]
-kind = "beam"
-cells = [2, 1, 1]
-[body]
-name = "fem"
-material = "linear"
-E = 1e5
-nu = 0.3
-density = 1000.0
-[boundary]
-fixed = ["left"]
-[loads]
-gravity = [0.0, 0.0, -9.81]
-[integrator]
-type = "symplectic_euler"
-[time]
-dt = 0.001
-duration = 0.01
-[output]
-render = []
-"""
+SCENE = small_scene("res", integrator="symplectic_euler", dt=0.001, duration=0.01)
 
 
 def _scene(tmp_path, text=SCENE) -> Path:

@@ -22,33 +22,11 @@ from fem_elastic.app import cli
 from fem_elastic.app.run_lock import (
     LOCK_NAME, RunLock, check_output_dir, check_render_target, foreign_entries, remove_stale_variants,
 )
+from small_scene import small_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 
-SCENE = """\
-[scene]
-name = "lock"
-[mesh]
-kind = "beam"
-cells = [2, 1, 1]
-[body]
-name = "fem"
-material = "linear"
-E = 1e6
-nu = 0.3
-density = 1000.0
-[boundary]
-fixed = ["left"]
-[loads]
-gravity = [0.0, 0.0, -9.81]
-[integrator]
-type = "implicit_euler"
-[time]
-dt = 0.01
-duration = 0.02
-[output]
-render = []
-"""
+SCENE = small_scene("lock", E="1e6")
 
 #: a process that takes the lock on argv[1] with RunLock, says so, and holds it until killed or
 #: interrupted (Ctrl-C: the `with` block releases it on the way out)

@@ -57,7 +57,7 @@ def test_quick_sweep_covers_every_problem_with_unique_ids():
     cases = accuracy_cases(quick=True)
     ids = [c.id for c in cases]
     assert len(set(ids)) == len(ids)
-    # the methods of issue 16 are their own problem (tests/test_study_accuracy_methods.py)
+    # the methods of issue 16 are their own problem (tests/test_study_methods.py)
     assert {c.params["problem"] for c in cases} == set(PROBLEMS) | {"methods"}
     assert SUBSET <= set(ids)
     json.dumps([c.params for c in cases])  # JSON-able

@@ -68,11 +68,14 @@ def test_p2_mid_edge_values_are_the_solution_at_the_edge_nodes(tmp_path):
         # doflocs of the edge nodes are computed by scikit-fem's mapping: 1e-15 m round-off
         np.testing.assert_allclose(X[cells[:, 4 + j]], 0.5 * (X[cells[:, a]] + X[cells[:, b]]),
                                    rtol=0, atol=1e-15)
-    # a bending beam's edges curve: the mid-edge values differ from the vertex mean
+    # a bending beam's edges curve: the mid-edge values differ from the vertex mean by a share
+    # of the deflection (measured 10 % of max |u| on edge 0-1), where round-off of the mean, or
+    # edge nodes written as the mean, would leave 1e-16 of it
     mean = 0.5 * (u[cells[:, 0]] + u[cells[:, 1]])
-    assert np.max(np.abs(u[cells[:, 4]] - mean)) > 1e-9
+    assert np.max(np.abs(u[cells[:, 4]] - mean)) > 1e-3 * np.max(np.abs(u))
     series = read_series(tmp_path)  # read back at the vertices, as fe.simulate records them
-    np.testing.assert_allclose(series.displacement, run.displacement, rtol=0, atol=1e-12)
+    # the frames store each state's x - X, the values fe.simulate records: bit for bit
+    np.testing.assert_array_equal(series.displacement, run.displacement)
     np.testing.assert_array_equal(series.tets, model.mesh.t.T)
 
 

@@ -19,35 +19,13 @@ import pytest
 
 import fem_elastic as fe
 from fem_elastic.files import _atomic_write, write_text_atomic
+from small_scene import small_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 
 resource = pytest.importorskip("resource", reason="RLIMIT_FSIZE needs the POSIX resource module")
 
-SCENE = """\
-[scene]
-name = "full"
-[mesh]
-kind = "beam"
-cells = [6, 2, 2]
-[body]
-name = "fem"
-material = "linear"
-E = 1e5
-nu = 0.3
-density = 1000.0
-[boundary]
-fixed = ["left"]
-[loads]
-gravity = [0.0, 0.0, -9.81]
-[integrator]
-type = "symplectic_euler"
-[time]
-dt = 0.001
-duration = 0.004
-[output]
-render = []
-"""
+SCENE = small_scene("full", integrator="symplectic_euler", dt=0.001, duration=0.004, cells=(6, 2, 2))
 
 #: the command, in a process whose files may not grow past argv[1] bytes
 LIMITED = textwrap.dedent("""

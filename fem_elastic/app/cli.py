@@ -71,6 +71,7 @@ def _int_at_least(minimum: int):
 
 
 _positive_int = _int_at_least(1)
+_non_negative_int = _int_at_least(0)
 
 
 def _render_side(text: str) -> int:
@@ -81,7 +82,6 @@ def _render_side(text: str) -> int:
     if v > MAX_RENDER_SIDE:
         raise argparse.ArgumentTypeError(f"must be <= {MAX_RENDER_SIDE} px, got {text}")
     return v
-_non_negative_int = _int_at_least(0)
 
 
 # ---------------------------------------------------------------------------------- run / demo
@@ -105,15 +105,15 @@ def _print_outcomes(out, outcomes, rendered, out_dir) -> None:
         steps = traj.steps if traj is not None else 0
         cut = traj.dt_cuts if traj is not None else 0
         frames = traj.times.size if traj is not None else 0
-        if getattr(o, "figures", None):  # a static run: its load steps, a frame per point of the path
+        if o.figures:  # a static run: its load steps, a frame per point of the path
             steps = o.figures["load_steps"]
             frames = len(o.result.path) if o.result is not None else 0
         out(f"{o.name:<{w}}{o.status:<12}{steps:>7d}{cut:>6d}{frames:>8d}{o.seconds_simulate:>14.2f}"
             f"{o.seconds_output:>12.2f}")
     for o in outcomes:
-        if getattr(o, "figures", None):
+        if o.figures:
             _print_static(out, o)
-        elif getattr(o, "physics", None):
+        elif o.physics:
             _print_dynamic(out, o)
     for o in outcomes:
         traj = o.trajectory
@@ -505,9 +505,10 @@ def _add_common(p, top: bool = False) -> None:
                    help="show the traceback of an error (for a bug report)")
 
 
-def _add_run_options(p, out_default=None) -> None:
+def _add_run_options(p, out_default=None, out_required: bool = True) -> None:
+    """--out (required, or ``out_default``), --no-render and --overwrite of `demo` and `run`."""
     if out_default is None:
-        p.add_argument("--out", required=True, metavar="DIR", help="output directory (created)")
+        p.add_argument("--out", required=out_required, metavar="DIR", help="output directory (created)")
     else:
         p.add_argument("--out", default=out_default, metavar="DIR", help="output directory (created)")
     p.add_argument("--no-render", action="store_true",
@@ -553,10 +554,7 @@ def _parser() -> argparse.ArgumentParser:
         epilog=_scene_help(),
     )
     run.add_argument("scene", metavar="SCENE.toml", nargs="?", help="the scene file")
-    run.add_argument("--out", metavar="DIR", help="output directory (created)")
-    run.add_argument("--no-render", action="store_true",
-                     help="write the VTU series and summary only, no movie or PNG frames")
-    run.add_argument("--overwrite", action="store_true", help=_OVERWRITE_HELP)
+    _add_run_options(run, out_required=False)  # --out is checked in _run: --resume DIR needs none
     run.add_argument("--variant", action="append", metavar="NAME",
                      help="run only this variant (repeatable; default all)")
     run.add_argument("--checkpoint-every", type=_non_negative_int, metavar="N",
@@ -681,7 +679,7 @@ def _one_line(text: object) -> str:
 
 def _report(exc: BaseException, debug: bool) -> int:
     """Say what ended the command in one line on stderr (with the traceback under --debug)."""
-    from ..errors import Diverged, FemElasticError, InvalidMesh, InvalidParameter
+    from ..errors import FemElasticError, InvalidMesh, InvalidParameter
 
     if isinstance(exc, BrokenPipeError):
         # the reader of our output went away (`fem-elastic info MESH | head`): stop quietly
@@ -698,9 +696,8 @@ def _report(exc: BaseException, debug: bool) -> int:
         traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
     if isinstance(exc, KeyboardInterrupt):
         message, status = "interrupted", _EXIT_INTERRUPTED
-    elif isinstance(exc, Diverged):  # a StepFailed too: a run that failed
-        message, status = f"error: {_one_line(exc)}", _EXIT_FAILED
-    elif isinstance(exc, FemElasticError):  # a bad input (2), or a computation that failed (1)
+    elif isinstance(exc, FemElasticError):  # a bad input (2), or a computation that failed (1:
+        # fe.Diverged and fe.StepFailed among them)
         message = f"error: {_one_line(exc)}"
         status = _EXIT_USAGE if isinstance(exc, (InvalidParameter, InvalidMesh)) else _EXIT_FAILED
     elif isinstance(exc, FileNotFoundError):

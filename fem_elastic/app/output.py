@@ -36,6 +36,7 @@ import numpy as np
 from ..dynamics.observers import Observer
 from ..errors import Diverged, InvalidParameter, StepFailed
 from ..physics.fields import CellFields
+from ..physics.pyvista_grid import _cells
 from .vtu import REFERENCE_POINTS, write_pvd, write_vtu_frame
 from ..files import write_text_atomic
 
@@ -78,10 +79,7 @@ def frame_grid(model) -> tuple[np.ndarray, np.ndarray]:
             "fe.ElasticBody(material, order=1), or write each P2 body as its own fe.Model run."
         )
     nodes = np.asarray(model.X, dtype=np.float64).reshape(-1, 3)
-    if getattr(model.space, "order", 1) == 2:
-        cells = np.asarray(model.space.scalar_basis.element_dofs, dtype=np.int64).T
-    else:
-        cells = np.asarray(model.mesh.t, dtype=np.int64).T
+    cells, _ = _cells(model)  # the cells of the model's pyvista grid, the same ones
     return nodes, cells
 
 
@@ -295,8 +293,6 @@ class SeriesWriter(Observer):
         self.units = {**FRAME_UNITS, "TimeValue": str(time_unit)}
         self.frames: list[tuple[float, str]] = []
         self.fields = CellFields(model)
-        self._X = model.to_vertices(model.X)  # (nv, 3) reference vertex positions (m)
-        self._tets = np.asarray(model.mesh.t, dtype=np.int64).T  # (n_tets, 4) vertex tets
         # the nodes written: every DOF node (P2: vertices first, then edge nodes) and the cells
         # over them, (n_tets, 4) or (n_tets, 10) in VTK's quadratic-tet order
         self._nodes, self._cells = frame_grid(model)
@@ -504,8 +500,8 @@ class SeriesWriter(Observer):
         out["status"] = status
         out["message"] = message or out.get("message", "") or status
         out.setdefault("ground", _ground_info(m))
-        out["n_vertices"] = int(self._X.shape[0])
-        out["n_tets"] = int(self._tets.shape[0])
+        out["n_vertices"] = int(m.mesh.p.shape[1])
+        out["n_tets"] = int(m.mesh.t.shape[1])
         out["frames"] = len(self.frames)
         out["record_every"] = self.every
         if self._last_fields is not None:

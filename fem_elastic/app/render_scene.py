@@ -26,15 +26,14 @@ value the user sets there is respected, and the logger then left alone.
 
 from __future__ import annotations
 
-import os
-import sys
 from collections.abc import Sequence
-from contextlib import contextmanager
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..errors import InvalidParameter
+from ..physics.pyvista_grid import _quiet_window_probe  # see the Notes above
+from ..physics.collision_surface import surface_triangles
 
 #: Fields to colour by: name -> (label, unit, where the values live).
 FIELDS = {
@@ -57,45 +56,6 @@ COLOR_PERCENTILE = 99.0
 
 
 # --- the data drawn: surfaces and scalars, as arrays ------------------------------------------
-
-
-def _boundary_faces(tets: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Triangles on the surface of a tet mesh, oriented outwards.
-
-    A face lies on the surface when exactly one tet has it. Only the surface
-    is drawn (the interior is hidden anyway), so the frame loop never runs
-    VTK's surface filter.
-
-    Parameters
-    ----------
-    tets : numpy.ndarray
-        ``(m, 4)`` vertex indices.
-    points : numpy.ndarray
-        ``(n, 3)`` reference positions (m), for the orientation.
-
-    Returns
-    -------
-    faces : numpy.ndarray
-        ``(f, 3)`` vertex indices, counter-clockwise seen from outside.
-    face_tet : numpy.ndarray
-        ``(f,)`` the tet each face belongs to (its cell data colours the face).
-    """
-    tets = np.asarray(tets, dtype=np.int64)
-    # face k of a tet leaves out vertex k
-    local = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
-    faces = tets[:, local].reshape(-1, 3)
-    key = np.sort(faces, axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    on_surface = counts[inverse.ravel()] == 1
-    faces = faces[on_surface]
-    face_tet = np.repeat(np.arange(len(tets)), 4)[on_surface]
-    opposite = tets[face_tet, np.tile(np.arange(4), len(tets))[on_surface]]
-    # orient: the normal points away from the tet's fourth vertex
-    a, b, c = (points[faces[:, i]] for i in range(3))
-    normal = np.cross(b - a, c - a)
-    inward = np.einsum("ij,ij->i", normal, points[opposite] - a) > 0
-    faces[inward] = faces[inward][:, [0, 2, 1]]
-    return faces, face_tet
 
 
 @dataclass(frozen=True)
@@ -136,7 +96,9 @@ def _run_from_series(series, title: str, color_by: str) -> _Run:
             f"{(len(times), len(points_ref), 3)} (frames, vertices, 3); the series is "
             "inconsistent: rewrite it with SeriesWriter."
         )
-    faces, face_tet = _boundary_faces(tets, points_ref)
+    # only the surface is drawn (the interior is hidden anyway): the frame loop never runs
+    # VTK's surface filter
+    faces, face_tet = surface_triangles(tets, points_ref, return_tets=True)
     _, _, association = FIELDS[color_by]
     if association == "cell":
         cell_data = getattr(series, "cell_data", None) or {}
@@ -264,28 +226,6 @@ def _union_bounds(runs: Sequence[_Run]) -> np.ndarray:
 # --- the plotter -------------------------------------------------------------------------------
 
 
-@contextmanager
-def _quiet_window_probe():
-    """Hide VTK's ``bad X server connection`` warning on headless Linux (see module Notes)."""
-    headless = (
-        sys.platform.startswith("linux")
-        and not os.environ.get("DISPLAY")
-        and not os.environ.get("WAYLAND_DISPLAY")
-        and "VTK_DEFAULT_OPENGL_WINDOW" not in os.environ
-    )
-    if not headless:
-        yield
-        return
-    from vtkmodules.vtkCommonCore import vtkLogger
-
-    before = vtkLogger.GetCurrentVerbosityCutoff()
-    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_ERROR)
-    try:
-        yield
-    finally:
-        vtkLogger.SetStderrVerbosity(before)
-
-
 def _camera(bounds: np.ndarray, aspect: float, view_angle: float = 30.0, fill: float = 1.0):
     """Fixed camera that fits ``bounds`` in a viewport: position, focal point, view up (m).
 
@@ -346,8 +286,9 @@ class _Scene:
         # the ground plane reaches a pad beyond the bodies: the camera frames it whole
         framed = bounds.copy()
         if any(run.ground_z is not None for run in self.runs):
-            framed[0, :2] -= _ground_pad(bounds)
-            framed[1, :2] += _ground_pad(bounds)
+            pad = _ground_pad(bounds)
+            framed[0, :2] -= pad
+            framed[1, :2] += pad
         cols = len(self.runs)
         camera = _camera(framed, aspect=(size[0] / cols) / (size[1] / rows), fill=1.0 - BAR_BAND)
         with _quiet_window_probe():
@@ -363,6 +304,14 @@ class _Scene:
         row_height = size[1] / rows
         # ... and a 28th of its width, so that titles of side-by-side panels stay apart
         font = int(np.clip(min(row_height / 20.0, size[0] / cols / 28.0), 8, 24))
+        # the undeformed bodies: their feature edges, drawn grey in every row
+        outlines = [
+            pv.PolyData(
+                run.points_ref, np.hstack([np.full((len(run.faces), 1), 3), run.faces]).ravel()
+            ).extract_feature_edges(feature_angle=30.0, boundary_edges=True,
+                                    non_manifold_edges=False, manifold_edges=False)
+            for run in self.runs
+        ]
         self._views = []  # (row, run, surface PolyData, time label) per viewport
         for r in range(rows):
             for c, run in enumerate(self.runs):
@@ -381,11 +330,7 @@ class _Scene:
                 )
                 if run.ground_z is not None:
                     self._add_ground(pv, p, bounds, run.ground_z)
-                # the undeformed body: its feature edges, grey
-                outline = pv.PolyData(
-                    run.points_ref, np.hstack([np.full((len(run.faces), 1), 3), run.faces]).ravel()
-                ).extract_feature_edges(feature_angle=30.0, boundary_edges=True,
-                                        non_manifold_edges=False, manifold_edges=False)
+                outline = outlines[c]
                 if outline.n_points:
                     p.add_mesh(outline, color=(0.45, 0.45, 0.45), line_width=1, lighting=False)
                 # the scene's name and the magnification once, top left of the first panel;
@@ -428,7 +373,7 @@ class _Scene:
     def _add_ground(pv, p, bounds, z):
         """A grey rectangle at height ``z`` under the bounds, padded by a tenth of their extent."""
         extent = bounds[1] - bounds[0]
-        pad = 0.1 * float(max(extent[0], extent[1], extent[2], 1e-12))
+        pad = _ground_pad(bounds)
         center = (float(bounds[:, 0].mean()), float(bounds[:, 1].mean()), z)
         plane = pv.Plane(center=center, direction=(0, 0, 1), i_size=extent[0] + 2 * pad,
                          j_size=extent[1] + 2 * pad, i_resolution=1, j_resolution=1)

@@ -16,7 +16,6 @@ import numpy as np
 
 from ..dynamics.state import State
 from ..physics import result_view
-from ..physics.pyvista_grid import nodal_positions
 from .output import LOAD_FACTOR_UNIT, SeriesWriter
 from .run_lock import RunLock, _is_run_dir, check_output_dir
 from .static_run import static_figures
@@ -57,16 +56,10 @@ def save_trajectory(traj, run_dir, model, *, overwrite: bool = False) -> Path:
 
 
 def _write_trajectory(traj, run_dir: Path, model) -> None:
-    X = np.asarray(model.X)
     writer = SeriesWriter(model, run_dir, every=1, info={"variant": Path(run_dir).name})
-    final = traj.final_state
     for k, t in enumerate(traj.times):
-        if final is not None and k == traj.times.size - 1 and float(final.t) == float(t):
-            state = final
-        else:
-            state = State(X + nodal_positions(model, traj.displacement[k]),
-                          nodal_positions(model, traj.velocity[k]), float(t))
-        writer.write_state(state)
+        x, v = traj._frame_dofs(k, model)  # the DOFs traj.to_pyvista(k) draws
+        writer.write_state(State(x, v, float(t)))
     # as the command records it: "diverged" / "failed" from fe.Diverged / fe.StepFailed's
     # trajectory (its message says which), "interrupted" for one stopped any other way
     word = traj.message.split(" ", 1)[0] if traj.message else ""
@@ -157,18 +150,13 @@ def dynamic_figures(model, traj, probes=None) -> dict:
     final = traj.final_state
     groups = list(model.fixed_groups) + list(model.prescribed_groups)
     if final is not None and groups:
-        from .static_run import _support_name
+        from .static_run import reactions_by_support
 
         g = np.asarray(model.gradient(final.x), dtype=float).reshape(-1, 3)
         held = np.zeros(model.ndofs, dtype=bool)
         held[model.held_dofs] = True
         g = np.where(held.reshape(-1, 3), g, 0.0)
-        reactions = {}
-        for _, where, _ in groups:
-            name = _support_name(where)
-            if name not in reactions:
-                reactions[name] = g[model.boundary_nodes(where)].sum(axis=0).tolist()
-        out["reactions"] = reactions
+        out["reactions"] = reactions_by_support(model, lambda where: g[model.boundary_nodes(where)].sum(axis=0))
     if probes:
         out["probes"] = probe_figures(model, probes, traj.times, u)
     return out

@@ -348,7 +348,7 @@ def write_scene_summary(out_dir, scene, outcomes, rendered, seconds, status=None
             "variants": {
                 o.name: {"status": o.status, "message": o.message, "run_dir": o.run_dir.name,
                          "seconds_simulate": o.seconds_simulate, "seconds_output": o.seconds_output,
-                         **(getattr(o, "figures", None) or {})}
+                         **(o.figures or {})}
                 for o in outcomes
             },
             "rendered": [str(Path(p).relative_to(out_dir)) for p in rendered],

@@ -35,6 +35,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python < 3.11
     import tomli as tomllib  # type: ignore[no-redef]  # the same API on Python 3.10
 
 from ..errors import FemElasticError, InvalidParameter
+from ..materials.base import elastic_constants
 from ..resources import check_input_file
 from .toml_lines import KeyLines as _KeyLines
 from .scene_schema import (
@@ -470,7 +471,7 @@ class Scene:
             mesh does not have, a vertex index out of range.
         """
         if self.spec.get("bodies") is not None:  # [[body]] tables: the placed meshes as one
-            return self.build()[:1][0].model.mesh
+            return self.build()[0].model.mesh
         mesh, _ = self._mesh()
         self._check_boundaries(mesh)
         return mesh
@@ -520,7 +521,8 @@ class Scene:
         # 1e-9: duration / dt in floating point may land a hair above an integer
         return max(1, math.ceil(ratio - 1e-9))
 
-    def _check_boundaries(self, mesh) -> None:
+    def _boundary_check(self, mesh, what: str = "the mesh"):
+        """``check(name, path)``: a SceneError at ``path`` when ``mesh`` (``what``) has no boundary ``name``."""
         names = sorted(mesh.boundaries or {})
         known = ", ".join(f'"{n}"' for n in names) or "none (fix vertices by index instead)"
 
@@ -528,9 +530,13 @@ class Scene:
             if name not in names:
                 near = closest(name, names)
                 hint = f' — did you mean "{near}"?' if near else "."
-                raise self._error(path, f'the mesh has no boundary "{name}"{hint} Its boundaries: '
+                raise self._error(path, f'{what} has no boundary "{name}"{hint} Its boundaries: '
                                         f"{known}.", near)
 
+        return check
+
+    def _check_boundaries(self, mesh) -> None:
+        check = self._boundary_check(mesh)
         fixed = self.spec["boundary"]["fixed"]
         nv = mesh.p.shape[1]
         if isinstance(fixed, dict):
@@ -648,12 +654,9 @@ class Scene:
         state = State.rest(model) if initial is None else self._guard(
             ("initial", "velocity"), State.rest, model, velocity=tuple(initial["velocity"]))
         out = spec["output"]
-        output = {"vtu": out["vtu"], "render": list(out["render"]), "color_by": out["color_by"],
-                  "size": tuple(out["size"]), "fps": out["fps"],
-                  "checkpoint_every": out["checkpoint_every"]}
         return BuiltRun(
             name=name, model=model, integrator=integrator, dt=dt, steps=steps, state=state,
-            record_every=out["every"], output=output,
+            record_every=out["every"], output=self._output(out["checkpoint_every"]),
             info=self._info(name, body, integ, integrator, mesh_info, steps),
         )
 
@@ -661,18 +664,20 @@ class Scene:
         """A run of a static scene: the model and the load steps of ``[solve]``."""
         from ..dynamics.state import State
 
-        spec = self.spec
-        solve = spec["solve"]
-        out = spec["output"]
-        output = {"vtu": out["vtu"], "render": list(out["render"]), "color_by": out["color_by"],
-                  "size": tuple(out["size"]), "fps": out["fps"], "checkpoint_every": 0}
+        solve = self.spec["solve"]
         static = {"steps": solve["steps"], "stability": solve["stability"],
                   "stabilize": solve["stabilize"]}
         info = self._info(name, body, None, None, mesh_info, solve["steps"])
         return BuiltRun(
             name=name, model=model, integrator=None, dt=0.0, steps=solve["steps"],
-            state=State.rest(model), record_every=1, output=output, info=info, static=static,
+            state=State.rest(model), record_every=1, output=self._output(0), info=info, static=static,
         )
+
+    def _output(self, checkpoint_every: int) -> dict:
+        """``BuiltRun.output``: the ``[output]`` table's settings of the renders and the series."""
+        out = self.spec["output"]
+        return {"vtu": out["vtu"], "render": list(out["render"]), "color_by": out["color_by"],
+                "size": tuple(out["size"]), "fps": out["fps"], "checkpoint_every": checkpoint_every}
 
     def _info(self, name, body, integ, integrator, mesh_info, steps) -> dict:
         spec = self.spec
@@ -685,13 +690,12 @@ class Scene:
             described = f'mass-spring ({body["calibration"]} calibration)'
             body_info = {"type": "springs", "calibration": body["calibration"], "k_d": body["k_d"],
                          "order": 1}
-        if body.get("mu") is not None:
-            material = MATERIALS[body["material"]](mu=body["mu"], lam=body["lam"])
-            body_info.update({"mu": body["mu"], "lam": body["lam"]})
+        if body.get("mu") is not None:  # Lame's pair (a fem body's): E and nu derived, for reference
+            c = elastic_constants(mu=body["mu"], lam=body["lam"], who="[body]")
+            body_info.update({"mu": body["mu"], "lam": body["lam"], "E": c.E, "nu": c.nu})
         else:
-            material = None
-        body_info.update({"E": material.E if material else body["E"],
-                          "nu": material.nu if material else body["nu"], "density": body["density"]})
+            body_info.update({"E": body["E"], "nu": body["nu"]})
+        body_info["density"] = body["density"]
         if body["type"] == "fem" and body.get("formulation", "displacement") != "displacement":
             body_info["formulation"] = body["formulation"]
         g = spec["ground"]

@@ -151,18 +151,7 @@ def validate_bodies(document: dict) -> dict:
 
 def _check_boundaries(scene, mesh, body: dict, path: tuple) -> None:
     """A SceneError for a boundary name this body's mesh lacks or a vertex index out of range."""
-    from .schema_types import closest
-
-    names = sorted(mesh.boundaries or {})
-    known = ", ".join(f'"{n}"' for n in names) or "none (fix vertices by index instead)"
-
-    def check(name, where):
-        if name not in names:
-            near = closest(name, names)
-            hint = f' — did you mean "{near}"?' if near else "."
-            raise scene._error(where, f'the mesh of body "{body["name"]}" has no boundary "{name}"{hint} '
-                                      f"Its boundaries: {known}.", near)
-
+    check = scene._boundary_check(mesh, f'the mesh of body "{body["name"]}"')
     fixed, nv = body["fixed"], mesh.p.shape[1]
     for i, f in enumerate(fixed.items() if isinstance(fixed, dict) else fixed):
         f = f[0] if isinstance(fixed, dict) else f

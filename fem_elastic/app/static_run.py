@@ -34,6 +34,20 @@ def _support_name(where) -> str:
     return f"vertices ({np.size(where)})"
 
 
+def reactions_by_support(model, force_on) -> dict:
+    """``{support name: [Fx, Fy, Fz]}`` (N) over the model's fixed and prescribed supports.
+
+    ``force_on(where)`` gives the total force on one support; a name held by
+    several groups (e.g. rollers in x and in z on one boundary) is reported once.
+    """
+    reactions: dict = {}
+    for _, where, _ in list(model.fixed_groups) + list(model.prescribed_groups):
+        name = _support_name(where)
+        if name not in reactions:
+            reactions[name] = [float(v) for v in force_on(where)]
+    return reactions
+
+
 def static_figures(model, result) -> dict:
     """The physical result of a static solve, in plain values for ``summary.json``.
 
@@ -44,11 +58,7 @@ def static_figures(model, result) -> dict:
     u = np.asarray(result.displacement)
     norms = np.linalg.norm(u, axis=1)
     k = int(np.argmax(norms)) if norms.size else 0
-    reactions = {}
-    for _, where, _ in list(model.fixed_groups) + list(model.prescribed_groups):
-        name = _support_name(where)
-        if name not in reactions:
-            reactions[name] = [float(v) for v in result.reaction_force(where)]
+    reactions = reactions_by_support(model, result.reaction_force)
     return {
         "solve": "static",
         "converged": bool(result.converged),
@@ -122,6 +132,5 @@ def run_static_variant(run, out_dir):
     last = result.path[-1]
     writer.finish(None, status=status, message=message, extra=extra,
                   final_state=State(last.x, v0, float(last.load_factor)))
-    outcome = RunOutcome(run.name, run_dir, status, message, None, elapsed, writer.seconds_output, run)
-    outcome.result, outcome.figures = result, figures
-    return outcome
+    return RunOutcome(run.name, run_dir, status, message, None, elapsed, writer.seconds_output, run,
+                      result=result, figures=figures)

@@ -714,6 +714,25 @@ def warped_apply_p1(x, X, v, nodes, Dm_inv, V, prm, out):
 
 
 # det F of the vertex tets -----------------------------------------------------------
+@_jit_inline
+def _tet_volume_ratio(p, tets, ref_det, e):
+    """``det(Ds) / det(Dm)`` of tet e (the body of both loops below, inlined into them)."""
+    i0, i1, i2, i3 = tets[0, e], tets[1, e], tets[2, e], tets[3, e]
+    a00 = p[i1, 0] - p[i0, 0]
+    a10 = p[i1, 1] - p[i0, 1]
+    a20 = p[i1, 2] - p[i0, 2]
+    a01 = p[i2, 0] - p[i0, 0]
+    a11 = p[i2, 1] - p[i0, 1]
+    a21 = p[i2, 2] - p[i0, 2]
+    a02 = p[i3, 0] - p[i0, 0]
+    a12 = p[i3, 1] - p[i0, 1]
+    a22 = p[i3, 2] - p[i0, 2]
+    det = (a00 * (a11 * a22 - a12 * a21)
+           - a01 * (a10 * a22 - a12 * a20)
+           + a02 * (a10 * a21 - a11 * a20))
+    return det / ref_det[e]
+
+
 @_jit
 def tet_volume_ratios(p, tets, ref_det, out):
     """``out[e] = det(Ds) / det(Dm)`` of each tet, from vertex positions ``p`` ``(n, 3)``.
@@ -724,37 +743,11 @@ def tet_volume_ratios(p, tets, ref_det, out):
     per-step inversion watch cost more than a fused explicit step).
     """
     for e in range(tets.shape[1]):
-        i0, i1, i2, i3 = tets[0, e], tets[1, e], tets[2, e], tets[3, e]
-        a00 = p[i1, 0] - p[i0, 0]
-        a10 = p[i1, 1] - p[i0, 1]
-        a20 = p[i1, 2] - p[i0, 2]
-        a01 = p[i2, 0] - p[i0, 0]
-        a11 = p[i2, 1] - p[i0, 1]
-        a21 = p[i2, 2] - p[i0, 2]
-        a02 = p[i3, 0] - p[i0, 0]
-        a12 = p[i3, 1] - p[i0, 1]
-        a22 = p[i3, 2] - p[i0, 2]
-        det = (a00 * (a11 * a22 - a12 * a21)
-               - a01 * (a10 * a22 - a12 * a20)
-               + a02 * (a10 * a21 - a11 * a20))
-        out[e] = det / ref_det[e]
+        out[e] = _tet_volume_ratio(p, tets, ref_det, e)
 
 
 @_pjit
 def tet_volume_ratios_threaded(p, tets, ref_det, out):
     """:func:`tet_volume_ratios` on numba's threads (the same bits: each tet is independent)."""
     for e in numba.prange(tets.shape[1]):
-        i0, i1, i2, i3 = tets[0, e], tets[1, e], tets[2, e], tets[3, e]
-        a00 = p[i1, 0] - p[i0, 0]
-        a10 = p[i1, 1] - p[i0, 1]
-        a20 = p[i1, 2] - p[i0, 2]
-        a01 = p[i2, 0] - p[i0, 0]
-        a11 = p[i2, 1] - p[i0, 1]
-        a21 = p[i2, 2] - p[i0, 2]
-        a02 = p[i3, 0] - p[i0, 0]
-        a12 = p[i3, 1] - p[i0, 1]
-        a22 = p[i3, 2] - p[i0, 2]
-        det = (a00 * (a11 * a22 - a12 * a21)
-               - a01 * (a10 * a22 - a12 * a20)
-               + a02 * (a10 * a21 - a11 * a20))
-        out[e] = det / ref_det[e]
+        out[e] = _tet_volume_ratio(p, tets, ref_det, e)

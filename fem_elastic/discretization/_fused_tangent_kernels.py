@@ -48,7 +48,7 @@ import weakref
 import numba
 import numpy as np
 
-from ._fused_kernels import LINEAR, NEOHOOKEAN, STVK, _cofactor, _deformation_gradient
+from ._fused_kernels import LINEAR, NEOHOOKEAN, STVK, _cofactor, _deformation_gradient, _frobenius2
 
 _jit = numba.njit(cache=True, error_model="numpy", nogil=True)
 
@@ -78,7 +78,7 @@ def _stvk_C(C, F, prm):
             cab = F[a] * F[b] + F[3 + a] * F[3 + b] + F[6 + a] * F[6 + b]  # (F^T F)_ab
             S[a, b] = mu * cab
             B[a, b] = F[3 * a] * F[3 * b] + F[3 * a + 1] * F[3 * b + 1] + F[3 * a + 2] * F[3 * b + 2]
-    trE = 0.5 * (_frob2(F) - 3.0)  # tr(F^T F) = |F|^2
+    trE = 0.5 * (_frobenius2(F) - 3.0)  # tr(F^T F) = |F|^2
     for a in range(3):
         S[a, a] += lam * trE - mu  # S = 2 mu E + lam tr(E) I = mu (F^T F - I) + lam trE I
     for i in range(3):
@@ -91,14 +91,6 @@ def _stvk_C(C, F, prm):
                     if j == l:
                         v += mu * B[i, k]
                     C[3 * i + j, 3 * k + l] = v
-
-
-@_jit
-def _frob2(F):
-    s = 0.0
-    for k in range(9):
-        s += F[k] * F[k]
-    return s
 
 
 @_jit
@@ -127,7 +119,7 @@ def _stable_neohookean_C(C, F, prm):
     ``K = cof F``, ``dK_ij/dF_kl = e_ikn e_jlq F_nq`` (materials.stable_neohookean).
     """
     mu_, lam_, alpha = prm
-    IC = _frob2(F)
+    IC = _frobenius2(F)
     K = _cofactor(F)
     J = F[0] * K[0] + F[1] * K[1] + F[2] * K[2]
     ic1 = 1.0 / (IC + 1.0)

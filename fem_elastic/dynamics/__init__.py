@@ -11,6 +11,7 @@ below, never :mod:`fem_elastic.study` or :mod:`fem_elastic.app`.
 """
 
 from .checkpoint import Checkpoint, load_checkpoint
+from .contact_watch import ContactIntersectionWarning
 from .integrators import (
     RK4,
     ExplicitEuler,
@@ -33,7 +34,8 @@ from .state import State
 from .trajectory import Trajectory
 
 __all__ = [
-    "Checkpoint", "ExplicitEuler", "ImplicitEuler", "Integrator", "LinearizedImplicitEuler",
+    "Checkpoint", "ContactIntersectionWarning", "ExplicitEuler", "ImplicitEuler", "Integrator",
+    "LinearizedImplicitEuler",
     "ConstraintNeoHookean", "Midpoint", "Newmark", "Observer", "PBD", "XPBD",
     "ProjectiveDynamics", "RK4", "ShapeMatcher", "ShapeMatching",
     "StabilityWarning", "State", "StepStats",

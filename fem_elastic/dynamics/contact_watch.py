@@ -52,8 +52,8 @@ class ContactWatch(Observer):
     """Records the contact's diagnostics after every step and checks the end for intersections."""
 
     def on_start(self, run) -> None:
-        for k, v in contact_stats(run.n_steps).items():
-            run.stats.setdefault(k, v)
+        # run.stats holds the CONTACT_FIELDS already: Run makes them (contact_stats) for a model
+        # with contact diagnostics, before a resumed run refills them from its checkpoint
         reset = getattr(run.model.contact, "reset_impulse", None)
         if callable(reset):  # impulses of responses before the run are not the first step's
             reset()

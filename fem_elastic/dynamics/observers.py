@@ -224,12 +224,12 @@ class BlowUpWatch(Observer):
         new = event.after
         if not (np.isfinite(new.x).all() and np.isfinite(new.v).all()):
             raise run.diverged("non-finite positions or velocities")
-        model = run.model
-        if self.driving or model.driving(new.t):
+        driving = run.model.driving(new.t)
+        if self.driving or driving:
             dw = self._drive_work(run, event.before, new)
             self.work += dw
             self.work_abs += abs(dw)
-        was_driving, self.driving = self.driving, model.driving(new.t)
+        was_driving, self.driving = self.driving, driving
         released = was_driving and not self.driving
         if not (event.record or released or (event.k + 1) % self.check_every == 0):
             return

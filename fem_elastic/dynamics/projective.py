@@ -73,6 +73,7 @@ from ..errors import Diverged, InvalidParameter
 from ..materials import Corotated, Material, ProjectiveCorotated
 from ..physics.elastic_body import ElasticPotential
 from .integrators.base import Integrator, StepStats, check_dt, check_state
+from .position_based.base import check_one_body
 from .state import State
 
 __all__ = ["ProjectiveDynamics"]
@@ -87,12 +88,7 @@ class _Setup:
     """What projective dynamics needs of a model, built once per model: not a setting."""
 
     def __init__(self, model):
-        if getattr(model, "models", None) is not None:
-            raise InvalidParameter(
-                f"projective dynamics takes one body (a fe.Model); a fe.MultiBody of {len(model.models)} bodies is "
-                "not supported by it: simulate several bodies with fe.ImplicitEuler, fe.SymplecticEuler, "
-                "fe.Newmark or the other force-based integrators, or put the pieces in one mesh."
-            )
+        check_one_body(model, "projective dynamics")
         body = model.body_potential
         material = getattr(body, "material", None)
         if not isinstance(body, ElasticPotential) or not isinstance(material, Material):

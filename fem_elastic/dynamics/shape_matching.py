@@ -85,6 +85,7 @@ import scipy.sparse as sp
 from ..errors import Diverged, InvalidParameter
 from ..materials.svd import polar_rotation
 from .integrators.base import Integrator, StepStats, check_dt, check_state
+from .position_based.base import check_one_body
 from .state import State
 
 __all__ = ["HELD_WEIGHT", "MODES", "ShapeMatcher", "ShapeMatching"]
@@ -476,12 +477,7 @@ class ShapeMatching(Integrator):
     def step(self, model, state: State, dt: float) -> State:
         h = check_dt(dt)
         check_state(model, state)
-        if getattr(model, "models", None) is not None:
-            raise InvalidParameter(
-                f"ShapeMatching takes one body (a fe.Model); a fe.MultiBody of {len(model.models)} bodies is "
-                "not supported by it: simulate several bodies with fe.ImplicitEuler, fe.SymplecticEuler, "
-                "fe.Newmark or the other force-based integrators, or put the pieces in one mesh."
-            )
+        check_one_body(model, "ShapeMatching")
         stats = self.last_stats = StepStats()
         sm = self.matcher(model, state.t + h)
         f = model.external_force()

@@ -33,6 +33,7 @@ import numpy as np
 
 from ..errors import Diverged, InvalidMesh, InvalidParameter, StepFailed
 from .checkpoint import Checkpoint, trajectory_from_records
+from .contact_watch import ContactWatch, contact_stats, has_contact_diagnostics
 from .integrators.base import check_dt, check_state
 from .observers import (BlowUpWatch, Callback, CheckpointWriter, InversionWatch, ProgressBar, Recorder,
                         StepEvent)
@@ -169,8 +170,6 @@ def simulate(
                                 checkpoint_dir, checkpoint_every, resume, 9 + 6 * model.mesh.p.shape[1])
     run = Run(model, integrator, h, n_steps, int(record_every), state, start)
     watch = BlowUpWatch(energy_growth, check_every=min(int(record_every), 10))
-    from .contact_watch import ContactWatch, has_contact_diagnostics
-
     contact_watch = [ContactWatch()] if has_contact_diagnostics(model) else []  # before the writers
     chain = [watch, InversionWatch(), Recorder(), *contact_watch,
              *([Callback(callback)] if callback is not None else []),
@@ -333,8 +332,6 @@ class Run:
         self.stats = {k: np.zeros(n_steps, dtype=np.int64) for k in COUNT_FIELDS}
         self.stats.update({k: np.zeros(n_steps) for k in STEP_FIELDS[len(COUNT_FIELDS):]})
         self.stats["min_det_F"][:] = np.nan  # measured by the InversionWatch on every accepted step
-        from .contact_watch import contact_stats, has_contact_diagnostics
-
         if has_contact_diagnostics(model):  # min distance, active contacts, force (ContactWatch)
             self.stats.update(contact_stats(n_steps))
         self.resumed_from = resumed_from

@@ -128,8 +128,7 @@ class Trajectory:
         for k, v in st.items():
             if k not in _NOT_SUMMED:
                 out[f"{k}_total"] = float(np.sum(v))
-        det = np.asarray(st.get("min_det_F", np.zeros(0)), dtype=float)
-        det = det[np.isfinite(det)]
+        det = self._finite_min_det_F()
         # the smallest det F over the run's steps, and how many steps ended with an inverted element
         out["min_det_F"] = float(det.min()) if det.size else None
         out["steps_inverted"] = int(np.count_nonzero(det <= 0.0))
@@ -138,12 +137,16 @@ class Trajectory:
         out.update(contact_summary(st))  # min distance, contacts, force, intersecting at the end
         return out
 
+    def _finite_min_det_F(self) -> np.ndarray:
+        """The steps' ``min_det_F`` that are finite (none for a record without it)."""
+        det = np.asarray(self.step_stats.get("min_det_F", np.zeros(0)), dtype=float)
+        return det[np.isfinite(det)]
+
     # looking at it ----------------------------------------------------------------------------
     def _rows(self) -> list[tuple[str, str]]:
         u = np.linalg.norm(self.displacement, axis=-1) if self.displacement.size else np.zeros(1)
         finite = u[np.isfinite(u)]
-        det = np.asarray(self.step_stats.get("min_det_F", np.zeros(0)), dtype=float)
-        det = det[np.isfinite(det)]
+        det = self._finite_min_det_F()
         rows = [
             ("integrator", f"{self.integrator or '?'}, dt = {_view.fmt(self.dt, 's')}"),
             ("steps", f"{self.steps} ({self.times.size} frames to t = "
@@ -210,17 +213,28 @@ class Trajectory:
         -------
         pyvista.UnstructuredGrid
         """
-        from ..physics.pyvista_grid import body_grid, nodal_positions
+        from ..physics.pyvista_grid import body_grid
 
         model = self._need_model(model)
         k = self._frame_index(frame)
+        x, v = self._frame_dofs(k, model)
+        return body_grid(model, x, v, time=float(self.times[k]))
+
+    def _frame_dofs(self, k: int, model) -> tuple[np.ndarray, np.ndarray]:
+        """``(ndofs,)`` DOF positions (m) and velocities (m/s) of frame ``k`` (0 <= k < frames).
+
+        The last frame of a run is its final state exactly; the others are their
+        recorded vertex values, P2 mid-edge nodes at their edge's mean
+        (:func:`~fem_elastic.physics.pyvista_grid.nodal_positions`). Drawn by
+        :meth:`to_pyvista`, written by :meth:`save`.
+        """
+        from ..physics.pyvista_grid import nodal_positions
+
         final = self.final_state
         if final is not None and k == self.times.size - 1 and float(final.t) == float(self.times[k]):
-            x, v = final.x, final.v
-        else:
-            x = np.asarray(model.X) + nodal_positions(model, self.displacement[k])
-            v = nodal_positions(model, self.velocity[k])
-        return body_grid(model, x, v, time=float(self.times[k]))
+            return final.x, final.v
+        return (np.asarray(model.X) + nodal_positions(model, self.displacement[k]),
+                nodal_positions(model, self.velocity[k]))
 
     def plot(self, frame: int = -1, *, scalars: str = "von_mises", magnification="auto",
              model=None, **kwargs):

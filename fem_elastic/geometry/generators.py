@@ -15,26 +15,13 @@ import numpy as np
 from skfem import MeshTet
 
 from ..errors import InvalidParameter
-from .mesh import reorient, validate_mesh
+from .mesh import _positive_ints, reorient, validate_mesh
 
 __all__ = ["cook_membrane_mesh", "COOK_CORNERS"]
 
 #: The panel's corners in the x-y plane, in the benchmark's units (mm in Cook 1974):
 #: lower left, lower right, upper right (where the tip displacement is read), upper left.
 COOK_CORNERS = ((0.0, 0.0), (48.0, 44.0), (48.0, 60.0), (0.0, 44.0))
-
-
-def _cells(value, n: int, name: str) -> tuple[int, ...]:
-    try:
-        cells = tuple(value)
-    except TypeError:
-        raise InvalidParameter(f"{name} must be {n} positive integers, got {value!r}.") from None
-    if len(cells) != n or not all(
-        isinstance(c, numbers.Integral) and not isinstance(c, bool) and c > 0  # type: ignore[operator]
-        for c in cells
-    ):
-        raise InvalidParameter(f"{name} must be {n} positive integers, got {value!r}.")
-    return tuple(int(c) for c in cells)
 
 
 def cook_membrane_mesh(cells=(8, 8), thickness: float = 1.0, layers: int = 1,
@@ -71,8 +58,10 @@ def cook_membrane_mesh(cells=(8, 8), thickness: float = 1.0, layers: int = 1,
     >>> int(tip.sum())                       # the upper right corner, on both faces
     2
     """
-    nx, ny = _cells(cells, 2, "cells")
-    (nz,) = _cells((layers,), 1, "layers")
+    nx, ny = _positive_ints(cells, 2, "cells")
+    if isinstance(layers, bool) or not isinstance(layers, numbers.Integral) or layers <= 0:
+        raise InvalidParameter(f"layers must be a positive integer, got {layers!r}.")
+    nz = int(layers)
     for name, value in (("thickness", thickness), ("scale", scale)):
         if isinstance(value, bool) or not isinstance(value, numbers.Real) or not (
             np.isfinite(value) and value > 0

@@ -690,6 +690,20 @@ def _positive_length(name: str, value) -> float:
     return value
 
 
+def _positive_ints(value, n: int, name: str, hint: str = "") -> tuple[int, ...]:
+    """``value`` as ``n`` positive integers (cell counts), or :class:`InvalidParameter` naming ``name``."""
+    try:
+        items = tuple(value)
+    except TypeError:
+        raise InvalidParameter(f"{name} must be {n} positive integers{hint}, got {value!r}.") from None
+    if len(items) != n or not all(
+        isinstance(c, numbers.Integral) and not isinstance(c, bool) and c > 0  # type: ignore[operator]
+        for c in items
+    ):
+        raise InvalidParameter(f"{name} must be {n} positive integers{hint}, got {items!r}.")
+    return tuple(int(c) for c in items)
+
+
 def beam_mesh(
     length: float = 1.0,
     width: float = 0.1,
@@ -740,16 +754,7 @@ def beam_mesh(
         _positive_length("width", width),
         _positive_length("height", height),
     )
-    try:
-        cells = tuple(cells)  # type: ignore[assignment]  # checked to be 3 ints below
-    except TypeError:
-        raise InvalidParameter(
-            f"cells must be 3 positive integers (nx, ny, nz), got {cells!r}."
-        ) from None
-    if len(cells) != 3 or not all(
-        isinstance(n, numbers.Integral) and not isinstance(n, bool) and n > 0 for n in cells
-    ):
-        raise InvalidParameter(f"cells must be 3 positive integers (nx, ny, nz), got {cells!r}.")
+    cells = _positive_ints(cells, 3, "cells", " (nx, ny, nz)")  # type: ignore[assignment]
     n_vertices = (cells[0] + 1) * (cells[1] + 1) * (cells[2] + 1)
     if n_vertices > _MAX_VERTICES:
         raise InvalidParameter(

@@ -137,11 +137,11 @@ def elastic_constants(E=None, nu=None, *, mu=None, lam=None, K=None,
     if given not in (("E", "nu"), ("mu", "lam"), ("mu", "K")):
         got = "no elastic constant" if not given else " and ".join(given)
         raise InvalidParameter(f"{who} got {got}: give {PAIRS_HELP}.")
+    if given == ("E", "nu"):
+        mu_, lam_ = lame_parameters(E, nu)  # checks E and nu (_check_E_nu)
+        return ElasticConstants(E, nu, mu_, lam_, E / (3.0 * (1.0 - 2.0 * nu)), given)
     for name in given:
         _check_real(name, values[name])
-    if given == ("E", "nu"):
-        mu_, lam_ = lame_parameters(E, nu)
-        return ElasticConstants(E, nu, mu_, lam_, E / (3.0 * (1.0 - 2.0 * nu)), given)
     if not mu > 0:
         raise InvalidParameter(
             f"the shear modulus mu must be > 0 Pa, got mu = {mu!r} ({who}). "

@@ -114,15 +114,25 @@ class Corotated(IsotropicMaterial):
 
     def _stress(self, F, U, s, V):
         R = np.einsum("ian,jan->ijn", U, V)
-        tr = s[0] + s[1] + s[2] - 3.0
-        return 2.0 * self.mu * (F - R) + (self.lam * tr) * R
+        return 2.0 * self.mu * (F - R) + self._volume_stress(s) * R
+
+    # the volume term, the one part a subclass (ProjectiveCorotated) changes ------------
+    def _volume_stress(self, s):
+        """The volume term's ``dpsi/ds_i`` (the same for each i): ``lam (sum s - 3)`` (Pa)."""
+        return self.lam * (s[0] + s[1] + s[2] - 3.0)
+
+    def _volume_stiffness(self, s):
+        """The volume term's ``d2psi/ds_a ds_b`` (the same for each a, b): ``lam`` (Pa)."""
+        return self.lam
 
     def singular_value_hessian(self, s: np.ndarray):
         """Eigensystem of the Hessian in terms of the signed singular values.
 
         ``H_ab = 2 mu d_ab + lam``; ``lam_flip = 2 mu``;
         ``lam_twist = (psi_i + psi_j) / max(s_i + s_j, TWIST_EPS)`` with
-        ``psi_i = 2 mu (s_i - 1) + lam (sum s - 3)``.
+        ``psi_i = 2 mu (s_i - 1) + lam (sum s - 3)``. (The volume term's parts,
+        ``lam`` and ``lam (sum s - 3)``, come from ``_volume_stiffness`` and
+        ``_volume_stress``, which :class:`.ProjectiveCorotated` overrides.)
 
         Parameters
         ----------
@@ -143,13 +153,13 @@ class Corotated(IsotropicMaterial):
         >>> round(float(lt[0, 0])), round(float(lf[0, 0]))    # 0 and 2 mu at rest
         (0, 800000)
         """
-        mu, lam = self.mu, self.lam
+        mu = self.mu
         n = s.shape[-1]
         H = np.empty((3, 3, n))
-        H[...] = lam
+        H[...] = self._volume_stiffness(s)
         for a in range(3):
             H[a, a] += 2.0 * mu
-        g = lam * (s[0] + s[1] + s[2] - 3.0)
+        g = self._volume_stress(s)
         lt = np.empty_like(s)
         for row, (i, j, _k) in enumerate(PAIRS):
             lt[row] = (2.0 * mu * (s[i] + s[j] - 2.0) + 2.0 * g) / np.maximum(s[i] + s[j], TWIST_EPS)

@@ -428,7 +428,7 @@ class EnergyMaterial(Material):
             I2 = 0.5 * (I1 * I1 - np.einsum("ijn,ijn->n", Cg, Cg)) if Cg is not None else None
             need_J = "J" in uses or (order > 0 and not self._code.zero1[2])
             K = _cofactor(F) if need_J and order > 0 else None
-            J = (_det(F, K) if K is not None else _det(F)) if need_J else None
+            J = _det(F, K) if need_J else None
         return I1, I2, J, Cg, K
 
     def _call(self, f, *args):
@@ -470,7 +470,7 @@ class EnergyMaterial(Material):
         with np.errstate(invalid="ignore"):
             total = out.sum()
         if not math.isfinite(total):  # NaN or -inf at finite F: undefined or beyond the float range
-            bad = ~np.isfinite(out) | np.isneginf(out)
+            bad = ~np.isfinite(out)
             bad &= np.isfinite(F).all(axis=(0, 1))
             out[bad] = np.inf
         if ok is not None:
@@ -738,11 +738,8 @@ class EnergyMaterial(Material):
                 mixed = 2.0 * d1[1] * s[i] * s[j]
                 lt[row] = base + mixed + d1[2] * s[k]
                 lf[row] = base - mixed - d1[2] * s[k]
-        if ok is not None:
-            bad = ~np.asarray(ok, dtype=bool)
-            H[..., bad] = np.nan
-            lt[:, bad] = np.nan
-            lf[:, bad] = np.nan
+        for A in (H, lt, lf):
+            _mask(A, ok)
         return H, lt, lf
 
 

@@ -58,8 +58,7 @@ import numpy as np
 
 from ..errors import InvalidParameter
 from .base import _flat, _overflow_to_inf
-from .corotated import TWIST_EPS, Corotated
-from .isotropic import PAIRS
+from .corotated import Corotated
 from .svd import signed_svd
 
 __all__ = ["ProjectiveCorotated"]
@@ -97,14 +96,21 @@ class ProjectiveCorotated(Corotated):
     >>> band = ProjectiveCorotated(E=1.0e6, nu=0.3, sigma_min=0.9, sigma_max=1.1)
     >>> bool(np.isclose(band.psi(1.05 * np.eye(3)), m.mu * 3 * 0.05 ** 2))   # no volume energy inside
     True
+    >>> H, lt, lf = ProjectiveCorotated(E=1.0e6, nu=0.25, sigma_min=0.9, sigma_max=1.1
+    ...                                 ).singular_value_hessian(np.ones((3, 1)))
+    >>> round(float(H[0, 1, 0])), round(float(lf[0, 0]))    # inside the band: no lam
+    (0, 800000)
+
+    Stress and tangent are :class:`fe.Corotated`'s with its volume term
+    ``lam (sum s - 3)`` replaced by ``3 lam delta``, and that term's stiffness
+    ``lam`` by zero inside the band.
     """
 
     sigma_min: float = 1.0
     sigma_max: float = 1.0
 
     def __init__(self, E=None, nu=None, *, mu=None, lam=None, K=None, sigma_min=1.0, sigma_max=1.0):
-        pair = {k: v for k, v in (("mu", mu), ("lam", lam), ("K", K)) if v is not None}
-        super().__init__(E, nu, **pair)
+        super().__init__(E, nu, mu=mu, lam=lam, K=K)
         for name, value in (("sigma_min", sigma_min), ("sigma_max", sigma_max)):
             if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) \
                     or not math.isfinite(value):
@@ -138,14 +144,19 @@ class ProjectiveCorotated(Corotated):
         m = (s[0] + s[1] + s[2]) / 3.0
         return m - np.clip(m, self.sigma_min, self.sigma_max)
 
-    def _outside(self, s):
-        """1.0 where the volume term is active (the mean stretch not strictly inside the band), else 0.
+    def _volume_stress(self, s):
+        """The volume term's ``dpsi/ds_i`` (the same for each i): ``3 lam delta`` (Pa)."""
+        return 3.0 * self.lam * self.volume_shift(s)
 
-        On a band's edge the second derivative from outside is taken; a band of zero
-        width (the default) is active everywhere.
+    def _volume_stiffness(self, s):
+        """The volume term's ``d2psi/ds_a ds_b``: ``lam`` where it is active, else 0 (Pa).
+
+        Active where the mean stretch is not strictly inside the band: on a band's
+        edge the second derivative from outside is taken; a band of zero width (the
+        default) is active everywhere.
         """
         m = (s[0] + s[1] + s[2]) / 3.0
-        return 1.0 - ((m > self.sigma_min) & (m < self.sigma_max)).astype(float)
+        return self.lam * (1.0 - ((m > self.sigma_min) & (m < self.sigma_max)).astype(float))
 
     # the four material methods ----------------------------------------------------------
     def psi(self, F: np.ndarray) -> np.ndarray:
@@ -174,46 +185,6 @@ class ProjectiveCorotated(Corotated):
         with np.errstate(invalid="ignore", over="ignore"):
             out = self.mu * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) + 4.5 * self.lam * delta * delta
         return _overflow_to_inf(out, F).reshape(batch)
-
-    def _stress(self, F, U, s, V):
-        R = np.einsum("ian,jan->ijn", U, V)
-        return 2.0 * self.mu * (F - R) + (3.0 * self.lam * self.volume_shift(s)) * R
-
-    def singular_value_hessian(self, s: np.ndarray):
-        """Eigensystem of the Hessian in the signed singular values (see the module notes).
-
-        Parameters
-        ----------
-        s : numpy.ndarray, shape (3, N)
-            Signed singular values.
-
-        Returns
-        -------
-        d2psi_ds2 : numpy.ndarray, shape (3, 3, N)
-            Pa.
-        lam_twist, lam_flip : numpy.ndarray, shape (3, N)
-            Pa, rows for the pairs (0, 1), (0, 2), (1, 2).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> m = ProjectiveCorotated(E=1.0e6, nu=0.25, sigma_min=0.9, sigma_max=1.1)
-        >>> H, lt, lf = m.singular_value_hessian(np.ones((3, 1)))
-        >>> round(float(H[0, 1, 0])), round(float(lf[0, 0]))    # inside the band: no lam
-        (0, 800000)
-        """
-        mu, lam = self.mu, self.lam
-        n = s.shape[-1]
-        H = np.empty((3, 3, n))
-        H[...] = lam * self._outside(s)
-        for a in range(3):
-            H[a, a] += 2.0 * mu
-        g = 3.0 * lam * self.volume_shift(s)
-        lt = np.empty_like(s)
-        for row, (i, j, _k) in enumerate(PAIRS):
-            lt[row] = (2.0 * mu * (s[i] + s[j] - 2.0) + 2.0 * g) / np.maximum(s[i] + s[j], TWIST_EPS)
-        lf = np.full_like(s, 2.0 * mu)
-        return H, lt, lf
 
     # what the local step of projective dynamics needs -----------------------------------
     def projections(self, F: np.ndarray):

@@ -26,7 +26,7 @@ from ..errors import InvalidMesh
 __all__ = ["CollisionSurface", "collision_surface", "surface_triangles"]
 
 
-def surface_triangles(tets: np.ndarray, points: np.ndarray) -> np.ndarray:
+def surface_triangles(tets: np.ndarray, points: np.ndarray, return_tets: bool = False):
     """Boundary triangles of a tet mesh, counter-clockwise seen from outside.
 
     A face lies on the boundary when exactly one tet has it; its normal
@@ -39,14 +39,21 @@ def surface_triangles(tets: np.ndarray, points: np.ndarray) -> np.ndarray:
     points : numpy.ndarray
         ``(n, 3)`` reference vertex positions (m), for the orientation.
 
+    return_tets : bool
+        Also return the tet each triangle belongs to (the renderer colours a
+        face by its tet's cell data).
+
     Returns
     -------
-    numpy.ndarray
+    faces : numpy.ndarray
         ``(f, 3)`` int64 vertex indices.
+    face_tet : numpy.ndarray
+        ``(f,)`` int64 tet indices, only with ``return_tets``.
     """
     tets = np.asarray(tets, dtype=np.int64).reshape(-1, 4)
     if tets.shape[0] == 0:
-        return np.zeros((0, 3), dtype=np.int64)
+        empty = np.zeros((0, 3), dtype=np.int64)
+        return (empty, np.zeros(0, dtype=np.int64)) if return_tets else empty
     local = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])  # face k leaves out vertex k
     faces = tets[:, local].reshape(-1, 3)
     key = np.sort(faces, axis=1)
@@ -59,7 +66,7 @@ def surface_triangles(tets: np.ndarray, points: np.ndarray) -> np.ndarray:
     normal = np.cross(b - a, c - a)
     inward = np.einsum("ij,ij->i", normal, points[opposite] - a) > 0
     faces[inward] = faces[inward][:, [0, 2, 1]]
-    return faces
+    return (faces, face_tet) if return_tets else faces
 
 
 def _edges_of(faces: np.ndarray) -> np.ndarray:

@@ -467,7 +467,9 @@ class BoundImpulseContact:
             mask[model.held_dofs] = True
             held = mask[surface.vertex_dofs].all(axis=1)
         self.held = held
-        #: pairs (vertex, triangle) closer than the thickness at rest: never in contact
+        #: pairs (vertex, triangle) closer than the thickness at rest: never in contact (keys
+        #: ``vertex * n_faces + triangle``); none while they are being found
+        self._excluded = np.zeros(0, dtype=np.int64)
         self._excluded = self._rest_exclusions()
         #: total impulse magnitude of the last response (N s)
         self.last_impulse = 0.0
@@ -489,7 +491,7 @@ class BoundImpulseContact:
             body = self.surface.body
             keep &= body[vi] != body[faces[tj, 0]]
         vi, tj = vi[keep], tj[keep]
-        if getattr(self, "_excluded", None) is not None and self._excluded.size:
+        if self._excluded.size:
             keep = ~np.isin(vi * len(faces) + tj, self._excluded)
             vi, tj = vi[keep], tj[keep]
         return vi, tj
@@ -585,7 +587,7 @@ class BoundImpulseContact:
         inv_m = np.where(self.held | ~(m_s > 0), 0.0, 1.0 / np.where(m_s > 0, m_s, 1.0))
         idx = np.concatenate([vi[:, None], self.surface.faces[tj]], axis=1)
         wts = np.concatenate([np.ones((vi.size, 1)), -w], axis=1)
-        P = self.surface.positions(x).copy()
+        P = self.surface.positions(x)  # a gather: a new array, moved in place below
         V = v[self.surface.vertex_dofs]
         s = self.settings
         self.last_impulse = resolve_impulses(idx, wts, n, V, inv_m, s.restitution, s.friction, s.iterations)

@@ -232,9 +232,9 @@ class BoundIPCContact(Potential):
         self.mu = spec.friction
         self._friction = ipctk.FrictionPotential(spec.epsv) if self.mu > 0 else None
         self._tangential = None
-        # The lagged friction's reference positions (m) and time step (s): arrays/float once
-        # lag_friction ran; read only while self._tangential is set.
-        self._x_ref: Any = None
+        # The lagged friction's reference surface positions (m, gathered once per lag) and time
+        # step (s): set by lag_friction; read only while self._tangential is set.
+        self._V_ref: Any = None
         self._h: Any = None
         start = self._collisions_at(V0)
         if len(start):
@@ -262,7 +262,11 @@ class BoundIPCContact(Potential):
         return self._collisions
 
     def _V(self, x):
-        return np.asfortranarray(np.asarray(x)[self.surface.vertex_dofs])
+        return np.asfortranarray(self.surface.positions(x))
+
+    def _U(self, V):
+        """The lagged friction's sliding velocities ``(V - V_ref) / h`` (m/s) of surface positions ``V``."""
+        return np.asfortranarray((V - self._V_ref) / self._h)
 
     def _scatter(self, g_s):
         g = np.zeros(self.ndofs)
@@ -286,8 +290,7 @@ class BoundIPCContact(Potential):
         c = self._collisions_at(V)
         e = float(self.barrier(c, self.mesh, V)) if not c.empty() else 0.0
         if self._tangential is not None:
-            U = (V - self._V(self._x_ref)) / self._h
-            e += self._h * float(self._friction(self._tangential, self.mesh, np.asfortranarray(U)))
+            e += self._h * float(self._friction(self._tangential, self.mesh, self._U(V)))
         return e if math.isfinite(e) else math.inf
 
     def gradient(self, x: np.ndarray) -> np.ndarray:
@@ -298,8 +301,7 @@ class BoundIPCContact(Potential):
         if not c.empty():
             g += self.barrier.gradient(c, self.mesh, V)
         if self._tangential is not None:
-            U = np.asfortranarray((V - self._V(self._x_ref)) / self._h)
-            g += self._friction.gradient(self._tangential, self.mesh, U)
+            g += self._friction.gradient(self._tangential, self.mesh, self._U(V))
         return self._scatter(g)
 
     def hessian(self, x: np.ndarray, project: bool = False):
@@ -313,8 +315,7 @@ class BoundIPCContact(Potential):
         if not c.empty():
             H = H + self.barrier.hessian(c, self.mesh, V, method)
         if self._tangential is not None:
-            U = np.asfortranarray((V - self._V(self._x_ref)) / self._h)
-            H = H + self._friction.hessian(self._tangential, self.mesh, U, method) / self._h
+            H = H + self._friction.hessian(self._tangential, self.mesh, self._U(V), method) / self._h
         return self._scatter_matrix(H)
 
     def linearize(self, x: np.ndarray, project: bool = False):
@@ -410,7 +411,7 @@ class BoundIPCContact(Potential):
         """The largest collision-free fraction in [0, 1] of the step ``x -> x + dx`` (CCD)."""
         ipctk = _ipctk()
         V0 = self._V(x)
-        V1 = np.asfortranarray(V0 + np.asarray(dx)[self.surface.vertex_dofs])
+        V1 = np.asfortranarray(V0 + self.surface.displacements(dx))
         return float(ipctk.compute_collision_free_stepsize(
             self.mesh, V0, V1, broad_phase=self._broad_phase, narrow_phase_ccd=self._ccd))
 
@@ -436,7 +437,7 @@ class BoundIPCContact(Potential):
         if not c.empty():
             t.build(self.mesh, V, c, self.barrier, self.mu)
         self._tangential = None if t.empty() else t
-        self._x_ref = np.array(x_ref, dtype=float)
+        self._V_ref = self._V(np.asarray(x_ref, dtype=float))
         self._h = float(h)
 
     def clear_friction(self) -> None:

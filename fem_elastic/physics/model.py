@@ -42,6 +42,33 @@ __all__ = ["Model"]
 log = logging.getLogger(__name__)
 
 
+def bind_contact(model, contact):
+    """Bind ``contact=`` to ``model`` (a Model or a MultiBody); the bound object, or None.
+
+    A bound potential (``kind == "potential"``, e.g. IPC) joins ``model.contacts`` and
+    ``model.potentials``; an impulse response (``kind == "impulse"``) is applied by
+    ``model.respond_contacts``. Anything else is an InvalidParameter.
+    """
+    if contact is None:
+        return None
+    if isinstance(contact, type) or not hasattr(contact, "bind"):
+        raise InvalidParameter(
+            "contact must be an object with bind(model), e.g. fe.IPCContact(dhat=1e-3), or "
+            f"None; got {contact!r}."
+        )
+    bound = contact.bind(model)
+    kind = getattr(bound, "kind", None)
+    if kind == "potential":
+        model.contacts = (*model.contacts, bound)
+        model.potentials = (*model.potentials, bound)
+    elif kind != "impulse":
+        raise InvalidParameter(
+            f"contact {contact!r} bound to an object of kind {kind!r}; it must be "
+            "'potential' (a barrier energy such as fe.IPCContact) or 'impulse'."
+        )
+    return bound
+
+
 class Model:
     """A body on a tet mesh with its material, loads and supports.
 
@@ -167,29 +194,9 @@ class Model:
                     self.held_dofs):
             arr.setflags(write=False)
         #: the bound ``contact=`` object (IPC potential or impulse response), or None
-        self.contact = self._bind_contact(contact)
+        self.contact = bind_contact(self, contact)
 
     # contact between bodies (the ``contact=`` argument) --------------------------------------
-    def _bind_contact(self, contact):
-        if contact is None:
-            return None
-        if isinstance(contact, type) or not hasattr(contact, "bind"):
-            raise InvalidParameter(
-                "contact must be an object with bind(model), e.g. fe.IPCContact(dhat=1e-3), or "
-                f"None; got {contact!r}."
-            )
-        bound = contact.bind(self)
-        kind = getattr(bound, "kind", None)
-        if kind == "potential":
-            self.contacts = (*self.contacts, bound)
-            self.potentials = (*self.potentials, bound)
-        elif kind != "impulse":
-            raise InvalidParameter(
-                f"contact {contact!r} bound to an object of kind {kind!r}; it must be "
-                "'potential' (a barrier energy such as fe.IPCContact) or 'impulse'."
-            )
-        return bound
-
     def collision_surface(self):
         """The boundary triangles of the mesh on the model's DOFs (cached), for contact.
 
@@ -385,9 +392,8 @@ class Model:
         for obstacle in self.obstacles:
             if getattr(obstacle, "method", None) == "impulse":
                 x, v = obstacle.respond(x, v, self.lumped_mass[0::3])
-        bound = getattr(self, "contact", None)
-        if bound is not None and getattr(bound, "kind", None) == "impulse":
-            x, v = bound.respond(x, v, self.lumped_mass[0::3])
+        if self.contact is not None and self.contact.kind == "impulse":  # kind checked at binding
+            x, v = self.contact.respond(x, v, self.lumped_mass[0::3])
         return x, v
 
     def constraints(self, t: float):
@@ -456,7 +462,6 @@ class Model:
             )
         out, names = [], []
         held = self.held_dofs
-        self._driven_components = []
         for name, motion in driven.items():
             if not isinstance(name, str):
                 raise InvalidParameter(f"driven keys must be boundary names (str), got {name!r}.")

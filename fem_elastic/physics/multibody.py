@@ -45,7 +45,7 @@ from skfem import MeshTet
 
 from ..errors import InvalidParameter, UnderConstrained
 from .body import Body
-from .model import Model
+from .model import Model, bind_contact
 
 __all__ = ["BodyBoundary", "MultiBody", "StackedSpace"]
 
@@ -284,7 +284,7 @@ class MultiBody:
             arr.setflags(write=False)
         self.contacts = tuple(_OnBody(t, o[b], o[b + 1], n) for b, m in enumerate(models) for t in m.contacts)
         self.potentials = (self.body_potential, *self.loads, *self.contacts)
-        self.contact = self._bind_contact(contact)
+        self.contact = bind_contact(self, contact)
 
     # layout -----------------------------------------------------------------------
     def _stack_dofs(self, name):
@@ -469,26 +469,6 @@ class MultiBody:
         return B
 
     # contact, supports, driven boundaries ---------------------------------------------
-    def _bind_contact(self, contact):
-        if contact is None:
-            return None
-        if isinstance(contact, type) or not hasattr(contact, "bind"):
-            raise InvalidParameter(
-                "contact must be an object with bind(model), e.g. fe.IPCContact(dhat=1e-3), or "
-                f"None; got {contact!r}."
-            )
-        bound = contact.bind(self)
-        kind = getattr(bound, "kind", None)
-        if kind == "potential":
-            self.contacts = (*self.contacts, bound)
-            self.potentials = (*self.potentials, bound)
-        elif kind != "impulse":
-            raise InvalidParameter(
-                f"contact {contact!r} bound to an object of kind {kind!r}; it must be "
-                "'potential' (a barrier energy such as fe.IPCContact) or 'impulse'."
-            )
-        return bound
-
     def collision_surface(self):
         """The bodies' boundary surfaces stacked (DOFs offset, body ids set), cached."""
         surface = self.__dict__.get("_collision_surface")

@@ -222,8 +222,8 @@ def _magnification(grid, magnification) -> float:
 def _quiet_window_probe():
     """Hide VTK's harmless ``bad X server connection`` warning on headless Linux.
 
-    The same as :func:`fem_elastic.app.render_scene._quiet_window_probe` (whose
-    Notes say why): VTK still falls back to EGL or OSMesa, real errors still show.
+    Used here and by :mod:`fem_elastic.app.render_scene` (whose module Notes say
+    why): VTK still falls back to EGL or OSMesa, real errors still show.
     """
     headless = (sys.platform.startswith("linux") and not os.environ.get("DISPLAY")
                 and not os.environ.get("WAYLAND_DISPLAY")

@@ -158,7 +158,7 @@ def _is_where_list(spec) -> bool:
     )
 
 
-def _entries(spec, what: str, forms: str):
+def _entries(spec):
     """(where, value) pairs of a mapping or a list of pairs; None for another form."""
     if isinstance(spec, Mapping):
         out = []
@@ -183,10 +183,8 @@ def resolve_fixed(space, fixed, what: str = "fixed"):
     empty = np.zeros(0, dtype=np.int64)
     if fixed is None:
         return empty, []
-    entries = _entries(fixed, what, FIXED_FORMS)
+    entries = _entries(fixed)
     if entries is None:
-        if isinstance(fixed, Mapping):  # pragma: no cover - handled above
-            raise InvalidParameter(f"{what} must be {FIXED_FORMS}; got {fixed!r}.")
         if not isinstance(fixed, str):
             try:
                 size = np.size(fixed)
@@ -267,7 +265,7 @@ def resolve_displacement(space, displacement, fixed_groups=()):
     empty = np.zeros(0, dtype=np.int64)
     if displacement is None:
         return empty, np.zeros(0), []
-    entries = _entries(displacement, "displacement", DISPLACEMENT_FORMS)
+    entries = _entries(displacement)
     if entries is None:
         raise InvalidParameter(f"displacement must be {DISPLACEMENT_FORMS}; got {displacement!r}.")
     groups = []
@@ -311,7 +309,7 @@ def resolve_displacement(space, displacement, fixed_groups=()):
 
 
 def _fmt(v) -> str:
-    return "(" + ", ".join(f"{c:.4g}" + "" for c in np.where(np.abs(v) < 1e-12, 0.0, v)) + ")"
+    return "(" + ", ".join(f"{c:.4g}" for c in np.where(np.abs(v) < 1e-12, 0.0, v)) + ")"
 
 
 def _axis_name(a: np.ndarray) -> str:

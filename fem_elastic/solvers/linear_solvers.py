@@ -236,18 +236,20 @@ class AMGSolver:
         return ReusedAMG(self, fallback=fallback)
 
 
-def preconditioned_cg(A, b, M, rtol, maxiter, x0=None, stop_at_negative_curvature=False):
+def preconditioned_cg(A, b, M, rtol, maxiter, x0=None):
     """Preconditioned conjugate gradients for ``A x = b``, watching the curvature.
 
-    Stops when the true residual satisfies ``||b - A x|| <= rtol ||b||`` (the
-    2-norm, not the preconditioned one), after ``maxiter`` iterations, or,
-    with ``stop_at_negative_curvature``, at the first search direction with
-    ``p . A p <= 0``: ``A`` is then not positive definite (an exact tangent
-    under compression), and the iterate so far, which every earlier step
-    moved down the quadratic model ``x . A x / 2 - b . x`` (from ``x0 = 0``
-    it satisfies ``b . x > 0``), is returned as it is (Steihaug 1983; Nocedal
-    and Wright, Algorithm 7.1). Without the flag a non-positive curvature
-    also stops it (CG cannot go on), reported as not converged.
+    Stops when the residual satisfies ``||r|| <= rtol ||b||`` (the 2-norm, not
+    the preconditioned one; ``r`` is CG's updated residual, ``b - A x`` up to
+    round-off), after ``maxiter`` iterations, or at
+    the first search direction with ``p . A p <= 0`` (reported as not
+    converged, with ``negative_curvature``): ``A`` is then not positive
+    definite (an exact tangent under compression), and the iterate so far,
+    which every earlier step moved down the quadratic model ``x . A x / 2 -
+    b . x`` (from ``x0 = 0`` it satisfies ``b . x > 0``), is returned as it is
+    (Steihaug 1983; Nocedal and Wright, Algorithm 7.1). The caller decides
+    what that means: :class:`ReusedAMG` hands the iterate to Newton on an
+    exact tangent, and treats it as a failure on a positive definite one.
 
     Parameters
     ----------
@@ -388,8 +390,7 @@ class ReusedAMG:
             expected = np.log10(rtol) / self.rate  # iterations a fresh hierarchy would take
             limit = min(self.amg.maxiter, max(self.min_rebuild_iterations,
                                               int(np.ceil(self.rebuild_factor * expected))))
-        x, its, ok, neg = preconditioned_cg(A, b, self.preconditioner, rtol, limit, x0=x0,
-                                            stop_at_negative_curvature=not psd)
+        x, its, ok, _ = preconditioned_cg(A, b, self.preconditioner, rtol, limit, x0=x0)
         total = its
         if fresh and ok:
             self._measure(A, b, x, its)
@@ -400,8 +401,8 @@ class ReusedAMG:
         if not ok and not fresh:  # the kept hierarchy no longer fits: rebuild, go on from x
             log.debug("AMG-CG needed more than %d iterations on the kept hierarchy; rebuilding", limit)
             self._setup(A, near_null)
-            x, its, ok, neg = preconditioned_cg(A, b, self.preconditioner, rtol, self.amg.maxiter,
-                                                x0=x if np.all(np.isfinite(x)) else None)
+            x, its, ok, _ = preconditioned_cg(A, b, self.preconditioner, rtol, self.amg.maxiter,
+                                              x0=x if np.all(np.isfinite(x)) else None)
             total += its
             if ok:
                 self._measure(A, b, x, its, x0_used=True)

@@ -112,16 +112,15 @@ def _preconditioner(how, A, K_psd, idx, ndofs, near_null, factor, scale):
             return lu.solve(np.asarray(R, dtype=float))
         name = "lobpcg+lu"
     else:
-        import pyamg
+        import pyamg  # noqa: F401  (without it: ImportError, not the solver's InvalidParameter)
+
+        from .linear_solvers import AMGSolver
 
         P = A
         if how == "amg-psd":
             P = sp.csr_matrix(K_psd() if callable(K_psd) else K_psd)[idx][:, idx]
-        B = None if near_null is None else np.ascontiguousarray(near_null[idx], dtype=float)
-        ml = pyamg.smoothed_aggregation_solver(
-            P, B=B, symmetry="hermitian", smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}),
-            coarse_solver="splu", max_coarse=500,
-        )
+        # the Newton solves' hierarchy settings (rigid-body modes, Gershgorin-weighted smoother)
+        ml = AMGSolver().hierarchy(P, None if near_null is None else near_null[idx])
         Mop = ml.aspreconditioner(cycle="V")
 
         def apply(R):

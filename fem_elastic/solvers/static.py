@@ -530,12 +530,14 @@ def solve_static(
                 target = round(target * steps) / steps
         x0, pred = _predictor(model, problem, x, s, target, solver, near_null, pattern, total.seconds)
         max_step = _contact_max_step(model)
-        if max_step is not None and pred and max_step(x, x0 - x) < 1.0:
+        fraction = 1.0 if max_step is None else max_step(x, x0 - x)  # CCD of the start, once
+        if pred and fraction < 1.0:
             # the predictor would pass through a contact (IPC): start from the last equilibrium
             # with only the prescribed DOFs moved to the target (Newton moves only free DOFs,
             # so they must be at the target from the start)
             x0, pred = problem.held(x, target), 0
-        if max_step is not None and max_step(x, x0 - x) < 1.0:
+            fraction = max_step(x, x0 - x)
+        if fraction < 1.0:
             # the prescribed DOFs alone would cross a contact: a smaller load increment
             ds /= 2
             log.info("load factor %.4g: the prescribed motion crosses a contact; halving the "
@@ -629,14 +631,15 @@ def _diagnose_failure(model, x, total, load_factor=None) -> str:
     from ..physics.inversion import DetF
 
     try:
-        J = DetF(model)(x)
+        det_f = DetF(model)
+        J = det_f(x)
     except (ValueError, FloatingPointError):  # pragma: no cover - a state too broken to measure
         return ""
     if not np.all(np.isfinite(x)):
         return "The last iterate is not finite."
     bad = int(np.sum(J <= 0))
     if bad:
-        return (f"At load factor {load_factor:.4g}, {bad} {DetF(model).where} have det F <= 0 "
+        return (f"At load factor {load_factor:.4g}, {bad} {det_f.where} have det F <= 0 "
                 f"(min {float(J.min()):.3g}): the load inverts elements, which this material "
                 "cannot follow; a finer mesh, order=2, or a material that allows inversion "
                 "(fe.StableNeoHookean) may carry it.")
@@ -671,7 +674,6 @@ def _eigen(model, x, s, free, near_null, total, factor=None):
 
 def _check_final(model, problem, total, x, free, near_null, stabilize, solver, pattern, ec, factor, kw):
     """Check the final equilibrium's stability; perturb it when asked. Returns the final x."""
-    point = total.path[-1]
     if ec is None:
         ec = _eigen(model, x, 1.0, free, near_null, total, factor)
     tries = 0
@@ -704,7 +706,6 @@ def _check_final(model, problem, total, x, free, near_null, stabilize, solver, p
         total.perturbations = tries
         total.path[-1] = problem.point(x, 1.0, res.iterations)
         ec = _eigen(model, x, 1.0, free, near_null, total)
-        point = total.path[-1]
         if ec.stable:
             total.message += ("; the unstable equilibrium was perturbed along its lowest mode "
                               "and settled in a stable one")

@@ -75,6 +75,33 @@ def check_dt(dt) -> float:
     return float(dt)
 
 
+def restored_gradient(name: str, state, saved: dict, forget, written_by: str = "another integrator"):
+    """The ``dPi/dx`` at ``state.x`` that a checkpoint saved as ``saved["gradient"]``, or None.
+
+    For the schemes that remember the force at the end of a step (velocity
+    Verlet, the trapezoid rule). ``saved`` may hold only ``"gradient"``
+    (:class:`InvalidParameter` naming ``written_by`` otherwise); ``forget()``,
+    the integrator's reset of that memory, is called once the keys are
+    accepted, before the gradient is checked to be a finite ``(ndofs,)`` force.
+    """
+    if set(saved) - {"gradient"}:
+        raise InvalidParameter(
+            f"{name} restores a gradient from a checkpoint, got {sorted(saved)}: it was "
+            f"written by {written_by}."
+        )
+    forget()
+    if "gradient" not in saved:
+        return None
+    g = np.array(saved["gradient"], dtype=float)
+    if g.shape != state.x.shape or not np.isfinite(g).all():
+        raise InvalidParameter(
+            f"the checkpoint's {name} gradient (shape {g.shape}) is not a finite force of "
+            f"the state's {state.x.size} DOFs: it is damaged or of another model; resume from "
+            "an earlier checkpoint."
+        )
+    return g
+
+
 @dataclass
 class StepStats:
     """What one step cost.

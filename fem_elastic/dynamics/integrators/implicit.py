@@ -30,6 +30,7 @@ from ...solvers.linear_solvers import AutoSolver
 from ...materials import Corotated
 from ...physics.impulse_contact import reject_impulse_contact
 from ...solvers.newton import NewtonResult, _direction, newton_minimize
+from ...solvers.static import _contact_max_step
 from ..state import State
 from .base import Integrator, StepStats, check_dt, check_state
 from .incremental import IncrementalPotential
@@ -125,14 +126,6 @@ class _Implicit(Integrator):
             pattern=model.space.pattern,
             max_step=_contact_max_step(model),
         )
-
-
-def _contact_max_step(model):
-    """``model.max_step`` when the model has a potential contact with CCD (IPC), else None."""
-    contact = getattr(model, "contact", None)
-    if contact is None or getattr(contact, "kind", None) != "potential":
-        return None
-    return model.max_step
 
 
 class ImplicitEuler(_Implicit):

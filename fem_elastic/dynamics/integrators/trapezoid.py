@@ -82,7 +82,7 @@ import math
 
 import numpy as np
 
-from ...errors import InvalidParameter
+from .base import restored_gradient
 from .implicit import ImplicitEuler
 from .incremental import IncrementalPotential
 
@@ -201,23 +201,12 @@ class Trapezoid(ImplicitEuler):
 
     def restore_state(self, state, saved: dict) -> None:
         """Remember ``saved["gradient"]`` as dPi/dx at ``state.x`` (if saved)."""
-        unknown = set(saved) - {"gradient"}
-        if unknown:
-            raise InvalidParameter(
-                f"{self.name} restores a gradient from a checkpoint, got {sorted(saved)}: it was "
-                "written by another integrator."
-            )
+        g = restored_gradient(self.name, state, saved, self._forget_force)
+        if g is not None:
+            self._force = (None, state.x, g)
+
+    def _forget_force(self) -> None:
         self._force = (None, None, None)
-        if "gradient" not in saved:
-            return
-        g = np.array(saved["gradient"], dtype=float)
-        if g.shape != state.x.shape or not np.isfinite(g).all():
-            raise InvalidParameter(
-                f"the checkpoint's {self.name} gradient (shape {g.shape}) is not a finite force of "
-                f"the state's {state.x.size} DOFs: it is damaged or of another model; resume from "
-                "an earlier checkpoint."
-            )
-        self._force = (None, state.x, g)
 
     def _start_gradient(self, model, state, stats) -> np.ndarray:
         """dPi/dx at ``state.x``: remembered from the step that ended there, else evaluated."""

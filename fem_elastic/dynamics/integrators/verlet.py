@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...errors import InvalidParameter
+from .base import restored_gradient
 from .explicit import _Explicit
 
 __all__ = ["VelocityVerlet"]
@@ -114,35 +114,27 @@ class VelocityVerlet(_Explicit):
         """Take back what :meth:`checkpoint_state` returned (an empty dict starts afresh)."""
         if self.substep:
             return super().restore_state(state, saved)
-        if set(saved) - {"gradient"}:
-            raise InvalidParameter(
-                f"{self.name} restores a gradient from a checkpoint, got {sorted(saved)}: it was "
-                "written by another integrator (or with substep=True)."
-            )
-        self._forget()
-        if not saved:
-            return
-        g = np.array(saved["gradient"], dtype=float)
-        if g.shape != state.x.shape or not np.isfinite(g).all():
-            raise InvalidParameter(
-                f"the checkpoint's {self.name} gradient (shape {g.shape}) is not a finite force of "
-                f"the state's {state.x.size} DOFs: it is damaged or of another model; resume from "
-                "an earlier checkpoint."
-            )
-        self._gradient = (state.x, g)
+        g = restored_gradient(self.name, state, saved, self._forget,
+                              "another integrator (or with substep=True)")
+        if g is not None:
+            self._gradient = (state.x, g)
 
     # -- the scheme --------------------------------------------------------------------------
     def _advance(self, model, state, h, t1, stats):
         x0, v0 = state.x, state.v
-        a = self._acceleration(model, x0, v0, model.free_at(state.t), stats)  # the kept force, if any
+        a = self._acceleration(model, x0, v0, self._free(model, state.t), stats)  # the kept force, if any
         a *= 0.5 * h
         vh = a
         vh += v0  # v_half, in place of a temporary
         x1 = x0 + h * vh
-        dofs, xc, _ = model.constraints(t1)
+        w = self._work(model)
+        if w.free is None:  # a driven boundary: the held DOFs of t1, from the model
+            dofs, xc, _ = model.constraints(t1)
+            free1 = np.ones(model.ndofs, dtype=bool)
+            free1[dofs] = False
+        else:  # nothing driven: the cached ones (the same DOFs and values at every t)
+            dofs, xc, free1 = w.held, w.x_held, w.free
         x1[dofs] = xc  # the force below is taken where the step ends
-        free1 = np.ones(model.ndofs, dtype=bool)
-        free1[dofs] = False
         g1 = model.gradient(x1)
         stats.gradient_evaluations += 1
         self._gradient = (x1, g1)

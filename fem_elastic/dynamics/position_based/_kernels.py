@@ -1,13 +1,13 @@
 """numba sweeps behind :mod:`fem_elastic.dynamics.position_based.constraints` (imported on first use).
 
 Each kernel repeats the numpy projection of its constraint set
-(:meth:`ConstraintSet.corrections`) for one constraint at a time, over the
-constraints in ``order``:
+(:meth:`ConstraintSet.corrections`) for one constraint at a time, in the
+order the set stores them:
 
 - Gauss-Seidel (``jacobi`` False): each projection moves ``x`` at once, so the
-  next one sees it. The sets store their constraints colour by colour
-  (``order`` is ``0, 1, ..., n - 1``), and within a colour they share no vertex,
-  so this serial loop computes what the numpy path computes colour by colour.
+  next one sees it. The sets store their constraints colour by colour, and
+  within a colour they share no vertex, so this serial loop computes what the
+  numpy path computes colour by colour.
 - Jacobi (``jacobi`` True): every projection reads the unchanged ``x`` and
   adds its scaled correction into ``dx``; the caller adds ``dx`` to ``x``.
 
@@ -31,10 +31,9 @@ _jit = numba.njit(cache=True, error_model="numpy", nogil=True)
 
 
 @_jit
-def edge_sweep(x, w, nodes, rest, order, at, lam, scale, jacobi, dx):
+def edge_sweep(x, w, nodes, rest, at, lam, scale, jacobi, dx):
     """Distance constraints ``|x_b - x_a| - l0``: one Gauss-Seidel or Jacobi sweep."""
-    for ii in range(order.shape[0]):
-        e = order[ii]
+    for e in range(nodes.shape[0]):
         a, b = 3 * nodes[e, 0], 3 * nodes[e, 1]
         d0, d1, d2 = x[b] - x[a], x[b + 1] - x[a + 1], x[b + 2] - x[a + 2]
         length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
@@ -79,7 +78,7 @@ def _gradients(dCdF, d, g):
 
 
 @_jit
-def tet_sweep(x, w, nodes, Dm_inv, kind, shift, order, at, lam, scale, jacobi, dx):
+def tet_sweep(x, w, nodes, Dm_inv, kind, shift, at, lam, scale, jacobi, dx):
     """Tet constraints, one sweep: ``kind`` 0 volume (``J - 1``), 1 Neo-Hookean (``sqrt(I_C)``, ``J - gamma``).
 
     ``shift`` is ``gamma - 1 = mu / lam`` per tet (Neo-Hookean), unused for volume. F is
@@ -90,8 +89,7 @@ def tet_sweep(x, w, nodes, Dm_inv, kind, shift, order, at, lam, scale, jacobi, d
     """
     g1 = np.zeros((4, 3))
     g2 = np.zeros((4, 3))
-    for ii in range(order.shape[0]):
-        e = order[ii]
+    for e in range(nodes.shape[0]):
         k0, k1, k2, k3 = 3 * nodes[e, 0], 3 * nodes[e, 1], 3 * nodes[e, 2], 3 * nodes[e, 3]
         x00, x01, x02 = x[k0], x[k0 + 1], x[k0 + 2]
         a0, a1, a2 = x[k1] - x00, x[k1 + 1] - x01, x[k1 + 2] - x02

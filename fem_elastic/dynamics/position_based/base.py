@@ -79,7 +79,7 @@ from ...errors import InvalidParameter
 from ..integrators.base import Integrator, StepStats, check_dt, check_state
 from ..state import State
 
-__all__ = ["PositionBased", "METHODS", "check_p1_body"]
+__all__ = ["PositionBased", "METHODS", "check_one_body", "check_p1_body"]
 
 log = logging.getLogger(__name__)
 
@@ -99,16 +99,21 @@ def _number(value, name, low, high, *, low_open=False, high_open=False, example=
     return float(value)
 
 
-def check_p1_body(model, who: str):
-    """The model's finite element body if it is a P1 ``fe.ElasticBody``; else InvalidParameter."""
-    from ...physics.elastic_body import ElasticBody
-
+def check_one_body(model, who: str) -> None:
+    """InvalidParameter if ``model`` is a ``fe.MultiBody``: ``who`` (a scheme's name) takes one body."""
     if getattr(model, "models", None) is not None:
         raise InvalidParameter(
             f"{who} takes one body (a fe.Model); a fe.MultiBody of {len(model.models)} bodies is "
             "not supported by it: simulate several bodies with fe.ImplicitEuler, fe.SymplecticEuler, "
             "fe.Newmark or the other force-based integrators, or put the pieces in one mesh."
         )
+
+
+def check_p1_body(model, who: str):
+    """The model's finite element body if it is a P1 ``fe.ElasticBody``; else InvalidParameter."""
+    from ...physics.elastic_body import ElasticBody
+
+    check_one_body(model, who)
     body = model.body
     if not isinstance(body, ElasticBody):
         raise InvalidParameter(
@@ -219,15 +224,16 @@ class PositionBased(Integrator):
         x, v = state.x, state.v
         hs = h / self.substeps
         t0 = time.perf_counter()
+        coefficients = self._coefficients(setup.sets, hs)  # the same for every substep
         for k in range(1, self.substeps + 1):
             t1 = state.t + h if k == self.substeps else state.t + k * hs
-            x, v = self._substep(model, setup, x, v, t1, hs)
+            x, v = self._substep(model, setup, coefficients, x, v, t1, hs)
         stats.seconds["solve"] = time.perf_counter() - t0
         stats.linear_iterations = self.iterations * self.substeps
         stats.substeps = self.substeps
         return State(x, v, state.t + h)
 
-    def _substep(self, model, setup, x0, v0, t1, h):
+    def _substep(self, model, setup, coefficients, x0, v0, t1, h):
         """One pass of the loop of the module notes, ending at time ``t1``: ``(x, v)``."""
         dofs, xc, vc = model.constraints(t1)
         c = 1.0 + setup.alpha * h  # mass-proportional damping: mass (1 + alpha h) M
@@ -236,8 +242,8 @@ class PositionBased(Integrator):
         v_pred = (v0 + h * setup.f_ext / setup.mass) / c
         p = x0 + h * v_pred
         p[dofs] = xc
-        free3 = (w > 0.0).reshape(-1, 3)
-        coefficients = self._coefficients(setup.sets, h)
+        free = w > 0.0
+        free3 = free.reshape(-1, 3)
         lams = [np.zeros((len(s), s.m)) for s in setup.sets]  # XPBD: reset every (sub)step
         push = np.zeros(setup.n_vertices)  # how far the contacts moved each vertex out (m)
         for _ in range(self.iterations):
@@ -247,7 +253,7 @@ class PositionBased(Integrator):
                 _project_out(p, setup.obstacles, free3, push)
         v = (p - x0) / h
         if self.damping:
-            _damp(v, p, setup.mass, w > 0.0, self.damping)
+            _damp(v, p, setup.mass, free, self.damping)
         if push.any():
             _respond(p, v, v_pred, setup, push, free3, h)
         contact = getattr(model, "contact", None)  # fe.ImpulseContact: between parts, self-contact
@@ -255,7 +261,6 @@ class PositionBased(Integrator):
             p, v = contact.respond(p, v, setup.mass)
         p[dofs] = xc
         v[dofs] = vc
-        self._last_multipliers = lams
         return p, v
 
     def step_matrix(self, h, omega, zeta=0.0):  # pragma: no cover - documented absence
@@ -295,12 +300,12 @@ def _damp(v, x, mass, free, k) -> None:
 def _respond(x, v, v_pred, setup, push, free3, h) -> None:
     """Restitution and friction at the vertices in contact (module notes), in place."""
     P, V, Vp = x.reshape(-1, 3), v.reshape(-1, 3), v_pred.reshape(-1, 3)
+    contact = np.flatnonzero(push > 0.0)  # pushed out during the step: in contact
     for ob in setup.obstacles:
-        idx = np.flatnonzero(push > 0.0)  # pushed out during the step: in contact
-        n = ob.normal(P[idx])
-        vn_pred = np.einsum("ij,ij->i", Vp[idx], n)
+        n = ob.normal(P[contact])
+        vn_pred = np.einsum("ij,ij->i", Vp[contact], n)
         approach = vn_pred < 0.0
-        idx, n, vn_pred = idx[approach], n[approach], vn_pred[approach]
+        idx, n, vn_pred = contact[approach], n[approach], vn_pred[approach]
         e = np.where(-vn_pred > 2.0 * setup.g * h, ob.restitution, 0.0)
         vel = V[idx]
         vn = np.einsum("ij,ij->i", vel, n)

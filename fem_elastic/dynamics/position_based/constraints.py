@@ -168,7 +168,6 @@ class ConstraintSet:
             setattr(self, name, _frozen(np.asarray(value, dtype=float)[source], float))
         degree = np.bincount(self.nodes.ravel(), minlength=self.n_vertices)
         self.jacobi_scale = _frozen(1.0 / degree[self.nodes].max(axis=1), float)
-        self.order = _frozen(np.arange(n), np.int64)  # the sweep order of the numba kernels
 
     def __len__(self) -> int:
         return self.nodes.shape[0]
@@ -336,7 +335,7 @@ class EdgeDistance(ConstraintSet):
         return (length - self.rest[idx])[:, None], G
 
     def _numba_sweep(self, kernels, x, w, lam, at, scale, jacobi, dx):
-        kernels.edge_sweep(x, w, self.nodes, self.rest, self.order, at, lam, scale, jacobi, dx)
+        kernels.edge_sweep(x, w, self.nodes, self.rest, at, lam, scale, jacobi, dx)
 
 
 class _TetSet(ConstraintSet):
@@ -345,6 +344,7 @@ class _TetSet(ConstraintSet):
     kind = -1
 
     def __init__(self, mesh, compliance, shift=None):
+        """``compliance``: an array (n_tets, m), or a function of the tets' rest volumes (m^3) giving it."""
         t = np.asarray(mesh.t, dtype=np.int64).T  # (ne, 4)
         X = np.asarray(mesh.p, dtype=float).T  # (nv, 3)
         Dm = (X[t[:, 1:]] - X[t[:, :1]]).transpose(0, 2, 1)  # columns X_b - X_0
@@ -353,8 +353,11 @@ class _TetSet(ConstraintSet):
             raise InvalidParameter("a tet of the mesh has zero volume.")
         self.X = _frozen(X, float)
         n = t.shape[0]
+        volume = np.abs(det) / 6.0
+        if callable(compliance):
+            compliance = compliance(volume)
         # rows of Dm^-1: the shape-function gradients of nodes 1-3 (node 0's is minus their sum)
-        super().__init__(t, X.shape[0], compliance, Dm_inv=np.linalg.inv(Dm), volume=np.abs(det) / 6.0,
+        super().__init__(t, X.shape[0], compliance, Dm_inv=np.linalg.inv(Dm), volume=volume,
                          shift=np.zeros(n) if shift is None else np.broadcast_to(shift, (n,)))
 
     def _H(self, x, idx):
@@ -384,8 +387,7 @@ class _TetSet(ConstraintSet):
         return np.concatenate([-g.sum(axis=2, keepdims=True), g], axis=2)
 
     def _numba_sweep(self, kernels, x, w, lam, at, scale, jacobi, dx):
-        kernels.tet_sweep(x, w, self.nodes, self.Dm_inv, self.kind, self.shift, self.order, at, lam,
-                          scale, jacobi, dx)
+        kernels.tet_sweep(x, w, self.nodes, self.Dm_inv, self.kind, self.shift, at, lam, scale, jacobi, dx)
 
 
 class TetVolume(_TetSet):
@@ -465,11 +467,8 @@ class TetNeoHookean(_TetSet):
         if not (np.isfinite(mu) and np.isfinite(lam) and mu > 0 and lam > 0):
             raise InvalidParameter(f"mu and lam must be finite and > 0 Pa, got {mu!r} and {lam!r}.")
         self.mu, self.lam = float(mu), float(lam)
-        t = np.asarray(mesh.t)
-        X = np.asarray(mesh.p, dtype=float).T
-        V = np.abs(np.linalg.det((X[t[1:].T] - X[t[0]][:, None]).transpose(0, 2, 1))) / 6.0
-        compliance = np.stack([1.0 / (self.mu * V), 1.0 / (self.lam * V)], axis=1)
-        super().__init__(mesh, compliance, shift=self.mu / self.lam)
+        super().__init__(mesh, lambda V: np.stack([1.0 / (self.mu * V), 1.0 / (self.lam * V)], axis=1),
+                         shift=self.mu / self.lam)
 
     def values_and_gradients(self, x, idx):
         H = self._H(x, idx)
