@@ -99,9 +99,9 @@ class _Setup:
         if isinstance(material, ProjectiveCorotated) or type(material) is Corotated:
             pd = material  # a corotated body's energy is the projective one with the band [1, 1]
         else:
-            pd = ProjectiveCorotated(E=material.E, nu=material.nu)
+            pd = ProjectiveCorotated(mu=material.mu, lam=material.lam)  # exact, no (E, nu) round trip
             log.info("projective dynamics on a %s body minimises the projective corotated "
-                     "energy with its (E, nu), not the body's own energy", type(material).__name__)
+                     "energy with its Lame parameters, not the body's own energy", type(material).__name__)
         if pd.lam < 0.0:
             raise InvalidParameter(
                 f"projective dynamics needs a non-negative volume weight 3 lam, i.e. nu >= 0; the "

@@ -245,7 +245,9 @@ class PositionBased(Integrator):
         free = w > 0.0
         free3 = free.reshape(-1, 3)
         lams = [np.zeros((len(s), s.m)) for s in setup.sets]  # XPBD: reset every (sub)step
-        push = np.zeros(setup.n_vertices)  # how far the contacts moved each vertex out (m)
+        # how far each obstacle's contact moved each vertex out (m): one row per obstacle, so a
+        # vertex answers with the restitution, friction and normal of the obstacle that pushed it
+        push = np.zeros((len(setup.obstacles), setup.n_vertices))
         for _ in range(self.iterations):
             for s, lam, (at, scale) in zip(setup.sets, lams, coefficients):
                 s.sweep(p, w, lam, at, scale, self.method, self.relaxation)
@@ -271,15 +273,16 @@ class PositionBased(Integrator):
 
 
 def _project_out(x, obstacles, free3, push) -> None:
-    """Move the vertices inside an obstacle onto its surface (free DOFs only), adding the depth to push."""
+    """Move the vertices inside an obstacle onto its surface (free DOFs only), adding the depth to
+    that obstacle's row of push."""
     P = x.reshape(-1, 3)
-    for ob in obstacles:
+    for ob, pushed in zip(obstacles, push):
         d = ob.signed_distance(P)
         inside = np.flatnonzero(d < 0.0)
         if inside.size:
             n = ob.normal(P[inside])
             P[inside] -= (d[inside, None] * n) * free3[inside]
-            push[inside] -= d[inside]
+            pushed[inside] -= d[inside]
 
 
 def _damp(v, x, mass, free, k) -> None:
@@ -300,8 +303,8 @@ def _damp(v, x, mass, free, k) -> None:
 def _respond(x, v, v_pred, setup, push, free3, h) -> None:
     """Restitution and friction at the vertices in contact (module notes), in place."""
     P, V, Vp = x.reshape(-1, 3), v.reshape(-1, 3), v_pred.reshape(-1, 3)
-    contact = np.flatnonzero(push > 0.0)  # pushed out during the step: in contact
-    for ob in setup.obstacles:
+    for ob, pushed in zip(setup.obstacles, push):
+        contact = np.flatnonzero(pushed > 0.0)  # pushed out of this obstacle during the step
         n = ob.normal(P[contact])
         vn_pred = np.einsum("ij,ij->i", Vp[contact], n)
         approach = vn_pred < 0.0
@@ -313,7 +316,7 @@ def _respond(x, v, v_pred, setup, push, free3, h) -> None:
         vt = vel - vn[:, None] * n
         speed_t = np.linalg.norm(vt, axis=1)
         # the normal velocity change of the contact: its projections (push / h), then the bounce
-        dv_t = ob.friction * (push[idx] / h + vn_new - vn)
+        dv_t = ob.friction * (pushed[idx] / h + vn_new - vn)
         with np.errstate(divide="ignore", invalid="ignore"):
             keep = np.where(speed_t > dv_t, 1.0 - dv_t / speed_t, 0.0)
         new = keep[:, None] * vt + vn_new[:, None] * n
