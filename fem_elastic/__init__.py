@@ -151,6 +151,7 @@ from .physics import (
 from .solvers import (
     AMGSolver,
     AutoSolver,
+    CholmodSolver,
     DirectSolver,
     LinearSolverFailed,
     EquilibriumPoint,
@@ -182,7 +183,7 @@ __all__ = [
     "ExplicitEuler", "ImplicitEuler", "Integrator", "LinearizedImplicitEuler", "Midpoint", "Motion",
     "Newmark", "Prescribed", "RK4", "Rayleigh", "StabilityWarning", "State", "StepStats",
     "SymplecticEuler", "Trajectory", "Translate", "Trapezoid", "Twist", "VelocityVerlet", "simulate",
-    "AMGSolver", "AutoSolver", "Corotated", "DirectSolver", "Diverged", "ElasticBody",
+    "AMGSolver", "AutoSolver", "CholmodSolver", "Corotated", "DirectSolver", "Diverged", "ElasticBody",
     "ElasticPotential", "FemElasticError", "InvalidMesh", "InvalidParameter", "LinearElastic",
     "LinearPotential", "Material", "Model", "NeoHookean", "NotConverged", "Potential",
     "LinearSolverFailed", "RectangularCantilever", "SingularMatrix", "StableNeoHookean", "StaticResult", "StVK",

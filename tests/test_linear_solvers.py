@@ -33,8 +33,8 @@ def test_direct_and_amg_agree(system):
 
 def test_auto_solver_switches_on_size(system):
     A, b, B = system
-    assert fe.AutoSolver(max_direct_dofs=10).solve(A, b, B).method == "amg-cg"
-    assert fe.AutoSolver(max_direct_dofs=10**9).solve(A, b, B).method == "direct"
+    assert fe.AutoSolver(max_direct_dofs=10, max_factor_bytes=0).solve(A, b, B).method == "amg-cg"
+    assert fe.AutoSolver(max_direct_dofs=10**9, max_factor_bytes=0).solve(A, b, B).method == "direct"
 
 
 def test_singular_matrix_is_a_typed_error():
@@ -54,13 +54,14 @@ def test_amg_failure_is_reported_and_auto_falls_back_to_direct(system):
     with pytest.raises(fe.LinearSolverFailed, match="DirectSolver") as info:
         starved.solve(A, b, near_null=B)
     assert info.value.result.iterations == 2
-    res = fe.AutoSolver(max_direct_dofs=10, amg=starved).solve(A, b, B)
+    res = fe.AutoSolver(max_direct_dofs=10, max_factor_bytes=0, amg=starved).solve(A, b, B)
     assert res.method == "direct" and res.residual < 1e-10
 
 
 def test_strict_auto_solver_reraises(system):
     A, b, B = system
-    strict = fe.AutoSolver(max_direct_dofs=10, amg=fe.AMGSolver(rtol=1e-10, maxiter=2)).strict()
+    strict = fe.AutoSolver(max_direct_dofs=10, max_factor_bytes=0,
+                           amg=fe.AMGSolver(rtol=1e-10, maxiter=2)).strict()
     with pytest.raises(fe.LinearSolverFailed):
         strict.solve(A, b, B)
 

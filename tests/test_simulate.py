@@ -189,7 +189,7 @@ def _plain():
         (lambda m: fe.ImplicitEuler().step(m, None, 1e-3), "fe.State"),
         (lambda m: fe.RK4().step(m, fe.State(np.zeros(6), np.zeros(6)), 1e-3), "DOFs"),
         (lambda m: fe.simulate(m, fe.RK4(), 1e-3, steps=1, callback=3), "callback"),
-        (lambda m: fe.ImplicitEuler(linear_solver="direct"), "linear_solver"),
+        (lambda m: fe.ImplicitEuler(linear_solver="lu"), "unknown linear solver .lu.: use one of auto, direct"),
         (lambda m: fe.State(m.X, m.X, t=np.nan), "finite"),
         (lambda m: fe.State(m.X, m.X, t="a"), "finite"),
         (lambda m: fe.State.rest(m, velocity="up"), "velocity"),

@@ -23,9 +23,9 @@ by alternating
 
   ``L`` the scalar stiffness ("Laplacian") ``int grad N_a . grad N_b dV`` and
   ``M_s`` the scalar (lumped or consistent) mass: B does not depend on x, so
-  it is factorised once per model and dt (sparse LU,
-  ``scipy.sparse.linalg.splu``, on the free DOFs; the held ones are
-  eliminated), and its three coordinate blocks are the same matrix, so one
+  it is factorised once per model and dt (CHOLMOD's sparse Cholesky where
+  scikit-sparse is installed, else SuperLU's LU; on the free DOFs, the held
+  ones eliminated), and its three coordinate blocks are the same matrix, so one
   factorisation of a nodes-by-nodes matrix serves x, y and z.
 
 The global step is computed in its residual form ``x <- x - B^-1 dG/dx(x)``,
@@ -64,16 +64,20 @@ import math
 import numbers
 import time
 import weakref
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from ..errors import Diverged, InvalidParameter
 from ..materials import Corotated, Material, ProjectiveCorotated
 from ..physics.elastic_body import ElasticPotential
+from ..solvers.cholmod import spd_factor
 from .integrators.base import Integrator, StepStats, check_dt, check_state
 from .position_based.base import check_one_body
+
+if TYPE_CHECKING:  # for annotations only
+    from ..physics.multibody import AnyModel
 from .state import State
 
 __all__ = ["ProjectiveDynamics"]
@@ -177,7 +181,8 @@ class ProjectiveDynamics(Integrator):
     explicit = False
     order = 1
 
-    def __init__(self, iterations: int = 10, tol: float = 0.0, mass: str = "lumped"):
+    def __init__(self, iterations: int = 10, tol: float = 0.0,
+                 mass: Literal["lumped", "consistent"] = "lumped") -> None:
         super().__init__()
         self.iterations = _check_int("iterations", iterations, 1)
         if isinstance(tol, bool) or not isinstance(tol, numbers.Real) or not math.isfinite(tol) or tol < 0:
@@ -233,9 +238,9 @@ class ProjectiveDynamics(Integrator):
                 if idx.size == 0:
                     lus[k] = None
                     continue
-                Bff = B[idx][:, idx].tocsc()
-                lus[k] = spla.splu(Bff, permc_spec="MMD_AT_PLUS_A",
-                                   options={"SymmetricMode": True})
+                Bff = B[idx][:, idx].tocsr()
+                # SPD: CHOLMOD's Cholesky where installed, else SuperLU (solvers.cholmod)
+                lus[k] = spd_factor(Bff, "the projective-dynamics matrix")
                 self._factorizations += 1
         solvers = [lus[free3[:, c].tobytes()] for c in range(3)]
         if len(self._factors) >= _CACHE_SIZE:
@@ -244,7 +249,7 @@ class ProjectiveDynamics(Integrator):
         return self._factors[key]
 
     # the step --------------------------------------------------------------------------
-    def step(self, model, state: State, dt: float) -> State:
+    def step(self, model: AnyModel, state: State, dt: float) -> State:
         h = check_dt(dt)
         check_state(model, state)
         stats = self.last_stats = StepStats()

@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -25,9 +26,12 @@ import scipy.sparse.linalg as spla
 
 from ..errors import FemElasticError, InvalidParameter, NotConverged
 
+if TYPE_CHECKING:  # for annotations only (pyamg is optional)
+    from pyamg.multilevel import MultilevelSolver
+
 __all__ = [
     "LinearSolve", "DirectSolver", "AMGSolver", "AutoSolver", "SingularMatrix", "LinearSolverFailed",
-    "ReusedAMG", "preconditioned_cg",
+    "ReusedAMG", "preconditioned_cg", "superlu", "as_linear_solver", "LINEAR_SOLVER_NAMES",
 ]
 
 log = logging.getLogger(__name__)
@@ -110,9 +114,34 @@ class _FactorCache:
         self.key = (A.shape, A.indptr.copy(), A.indices.copy(), A.data.copy())
         self.lu = lu
 
+    def put_elsewhere_kept(self, shape, factor):
+        """Record a factor kept by another solver (CHOLMOD's) as the last one made, so the
+        stability check can precondition with it; :meth:`get` never returns it."""
+        self.key = (shape, None, None, None)
+        self.lu = factor
+
 
 _FACTORS = _FactorCache()
 _CACHE_MAX_DOFS = 50_000  # larger factors hold too much memory to keep around
+
+
+def superlu(A):
+    """SuperLU factor of a symmetric matrix ``A`` (symmetric ordering, diagonal pivots preferred).
+
+    Raises :class:`SingularMatrix` if ``A`` is singular.
+    """
+    try:
+        return spla.splu(
+            sp.csc_matrix(A),
+            permc_spec="MMD_AT_PLUS_A",
+            diag_pivot_thresh=0.0,
+            options=dict(SymmetricMode=True),
+        )
+    except RuntimeError as exc:  # SuperLU: "Factor is exactly singular"
+        raise SingularMatrix(
+            f"the stiffness matrix is singular ({exc}); some motion costs no energy: "
+            "check that the body is fixed (fixed=...) and that no element is degenerate."
+        ) from None
 
 
 @dataclass(frozen=True)
@@ -130,24 +159,14 @@ class DirectSolver:
     array([1., 2., 3.])
     """
 
-    def solve(self, A, b, near_null=None, rtol=None) -> LinearSolve:
+    def solve(self, A: sp.spmatrix, b: np.ndarray, near_null: np.ndarray | None = None,
+              rtol: float | None = None) -> LinearSolve:
         """Solve A x = b exactly (``rtol`` is accepted for a common interface and ignored)."""
         t0 = time.perf_counter()
         A = sp.csr_matrix(A)
         lu = _FACTORS.get(A)
         if lu is None:
-            try:
-                lu = spla.splu(
-                    sp.csc_matrix(A),
-                    permc_spec="MMD_AT_PLUS_A",
-                    diag_pivot_thresh=0.0,
-                    options=dict(SymmetricMode=True),
-                )
-            except RuntimeError as exc:  # SuperLU: "Factor is exactly singular"
-                raise SingularMatrix(
-                    f"the stiffness matrix is singular ({exc}); some motion costs no energy: "
-                    "check that the body is fixed (fixed=...) and that no element is degenerate."
-                ) from None
+            lu = superlu(A)
             if A.shape[0] <= _CACHE_MAX_DOFS:
                 _FACTORS.put(A, lu)
             setups = 1
@@ -184,7 +203,7 @@ class AMGSolver:
         if not (0 < self.rtol < 1):
             raise InvalidParameter(f"AMGSolver rtol must be in (0, 1), got {self.rtol!r}.")
 
-    def hierarchy(self, A, near_null=None):
+    def hierarchy(self, A: sp.spmatrix, near_null: np.ndarray | None = None) -> MultilevelSolver:
         """The smoothed-aggregation hierarchy of ``A`` (a pyamg ``MultilevelSolver``).
 
         ``A`` is copied first: pyamg may edit the structure of the matrix it is given.
@@ -214,7 +233,8 @@ class AMGSolver:
             max_coarse=500,
         )
 
-    def solve(self, A, b, near_null=None, rtol=None) -> LinearSolve:
+    def solve(self, A: sp.spmatrix, b: np.ndarray, near_null: np.ndarray | None = None,
+              rtol: float | None = None) -> LinearSolve:
         """Solve A x = b by AMG-preconditioned CG to ``rtol`` (default: the solver's own)."""
         rtol = self.rtol if rtol is None else max(float(rtol), self.rtol)
         t0 = time.perf_counter()
@@ -426,30 +446,97 @@ class ReusedAMG:
 
 @dataclass(frozen=True)
 class AutoSolver:
-    """The direct solver for small systems, AMG-CG for large ones.
+    """The fastest solver that fits: CHOLMOD where its factor fits in memory, else SuperLU
+    for small systems and AMG-CG for large ones.
 
-    If AMG-CG misses its tolerance (it can stall on badly conditioned
-    systems, e.g. very thin P2 beams), the system is solved directly instead,
-    with a warning in the log: a wrong direction would cost Newton far more.
+    The rule, measured (``scripts/bench_linear_solvers.py``, linear static solves on this
+    project's 2-core machine, medians of 5, each solver from nothing):
+
+    1. **CHOLMOD** (scikit-sparse, the ``cholmod`` extra) whenever it is installed and
+       the estimated factor, ``12 * 0.4 * nnz(A) * n^(1/3)`` bytes
+       (:func:`~fem_elastic.solvers.cholmod.fill_bytes`: the ``n^(4/3)`` fill of nested
+       dissection in 3-D, the coefficient above the 0.12-0.31 measured; a value and a row
+       index per entry of L), fits in ``max_factor_bytes`` (default: half the free
+       memory, :func:`fem_elastic.resources.available_memory`). Measured, each solver
+       from nothing, time against SuperLU's in the same process:
+
+       ========================================  =======  =========  =====================
+       linear static solve                       SuperLU  CHOLMOD    AMG-CG (rtol 1e-8)
+       ========================================  =======  =========  =====================
+       Cook slab, P2, nu = 0.4999, 21,609 DOFs   1        0.44-0.53  fails (500 its: 42x)
+       beam, P1, 22,143 DOFs                     1        0.29-0.52  0.67-0.70
+       beam, P1, 87,567 DOFs (153,600 tets)      1        0.11       0.16
+       ========================================  =======  =========  =====================
+
+       (medians of 5 in each of two runs, of 3 in one run for the 87,567-DOF beam, on a
+       2-core machine under load; CHOLMOD with Debian's OpenBLAS). CHOLMOD was the
+       fastest on every system, 1.4-2.3x AMG-CG on the beams, and its factor of the
+       87,567-DOF beam took 577 MiB; so it is taken wherever its factor fits, and AMG-CG
+       (whose memory is about three copies of the matrix) only where it does not.
+       A matrix that is not positive definite (an exact tangent under compression) is
+       solved by SuperLU (with a warning; from :meth:`strict`, Newton on an exact
+       tangent, without one, and above ``max_direct_dofs`` it raises
+       :class:`LinearSolverFailed` instead, so Newton projects the tangent, as after a
+       failed AMG-CG).
+       The analysis and factor are kept between calls (one process-wide
+       :class:`~fem_elastic.solvers.cholmod.CholmodSolver`): a new matrix of the same
+       pattern is only refactorised, the same matrix only back-substituted.
+    2. Otherwise (no scikit-sparse, or a factor too large): SuperLU up to
+       ``max_direct_dofs``, AMG-CG above (with pyamg). If AMG-CG misses its tolerance (it
+       can stall on badly conditioned systems, e.g. thin or nearly incompressible plates),
+       the system is solved directly instead, with a warning in the log: a wrong direction
+       would cost Newton far more.
 
     Parameters
     ----------
     max_direct_dofs : int
-        Largest system solved directly. Sparse LU's fill grows fast in 3-D; on
-        the project's machines AMG-CG overtakes it near 20k DOFs. Without
+        Largest system SuperLU solves when CHOLMOD is not used. Sparse LU's fill grows
+        fast in 3-D; on the project's machines AMG-CG overtakes it near 20k DOFs. Without
         pyamg installed, every system is solved directly.
     amg : AMGSolver
         The iterative solver used above the threshold.
     fallback : bool
-        Solve directly when AMG-CG fails (default); False re-raises.
+        Solve directly when AMG-CG fails, or by SuperLU when CHOLMOD finds the matrix not
+        positive definite (default); False raises :class:`LinearSolverFailed`.
+    max_factor_bytes : float, optional
+        Largest estimated CHOLMOD factor (bytes); 0 never uses CHOLMOD. Default: half the
+        free memory (2 GiB where it cannot be read).
     """
 
     max_direct_dofs: int = 20_000
     amg: AMGSolver = AMGSolver()
     fallback: bool = True
+    max_factor_bytes: float | None = None
 
-    def solve(self, A, b, near_null=None, rtol=None) -> LinearSolve:
-        """Direct below ``max_direct_dofs``, AMG-CG (to ``rtol`` if given) above."""
+    def uses_cholmod(self, ndofs: int, nnz: int) -> bool:
+        """Whether the rule picks CHOLMOD for a matrix of ``ndofs`` rows and ``nnz`` entries."""
+        from . import cholmod
+
+        budget = self.max_factor_bytes
+        if budget is None:
+            from ..resources import available_memory
+
+            free = available_memory()
+            budget = 2.0 * 2**30 if free is None else 0.5 * free
+        if budget <= 0 or not cholmod.have_cholmod():
+            return False
+        return cholmod.fill_bytes(ndofs, nnz) <= budget
+
+    def solve(self, A: sp.spmatrix, b: np.ndarray, near_null: np.ndarray | None = None,
+              rtol: float | None = None) -> LinearSolve:
+        """CHOLMOD if it fits, else direct below ``max_direct_dofs`` and AMG-CG (to ``rtol``) above."""
+        if self.uses_cholmod(A.shape[0], A.nnz):
+            from .cholmod import shared_solver
+
+            try:
+                return shared_solver().strict().solve(A, b)
+            except LinearSolverFailed as exc:  # not positive definite
+                if not self.fallback and A.shape[0] > self.max_direct_dofs:
+                    raise  # Newton on an exact tangent too large for LU: it projects (as after AMG-CG)
+                # what the rule without CHOLMOD does at this size: SuperLU, whose direction
+                # Newton then tests for descent (an exact tangent near a saddle still gives one)
+                (log.warning if self.fallback else log.debug)("%s Solving it by SuperLU instead.", exc)
+                return DirectSolver().solve(A, b, near_null)
         if A.shape[0] > self.max_direct_dofs and _have_pyamg():
             try:
                 return self.amg.solve(A, b, near_null, rtol=rtol)
@@ -463,17 +550,22 @@ class AutoSolver:
         """The same solver, raising :class:`LinearSolverFailed` instead of falling back.
 
         Newton uses it on an exact (possibly indefinite) tangent, where the
-        better remedy for a stalled CG is the PSD projection, not a large LU.
+        better remedy for a stalled CG, or a Cholesky that finds the tangent
+        indefinite, is the PSD projection, not a large LU.
         """
         return replace(self, fallback=False)
 
-    def reusing(self, ndofs: int):
+    def reusing(self, ndofs: int, nnz: int | None = None) -> ReusedAMG | AutoSolver:
         """The solver a Newton solve of ``ndofs`` unknowns should use for all its solves.
 
-        Above ``max_direct_dofs`` (with pyamg) a :class:`ReusedAMG` that keeps
-        one hierarchy across them and falls back to the direct solver as
-        :meth:`solve` does; else this solver itself.
+        This solver itself where the rule picks CHOLMOD (``nnz``: the matrix's
+        entries; default 81 per row, P2's most) or SuperLU (both keep their
+        factor); above ``max_direct_dofs`` (with pyamg) a :class:`ReusedAMG` that
+        keeps one hierarchy across the solves and falls back to the direct
+        solver as :meth:`solve` does.
         """
+        if self.uses_cholmod(ndofs, 81 * ndofs if nnz is None else nnz):
+            return self
         if ndofs > self.max_direct_dofs and _have_pyamg():
             return self.amg.reusing(fallback=self.fallback)
         return self
@@ -486,3 +578,40 @@ def _have_pyamg() -> bool:
         log.info("pyamg is not installed: solving directly (pip install 'fem_elastic[fast]')")
         return False
     return True
+
+
+#: the linear solvers by name (``linear_solver="..."`` in Python and in scene files)
+LINEAR_SOLVER_NAMES = ("auto", "direct", "amg", "cholmod")
+
+
+def as_linear_solver(spec=None):
+    """The solver object ``spec`` stands for: None is ``AutoSolver()``, a name from
+    :data:`LINEAR_SOLVER_NAMES` its solver, an object with ``solve`` itself.
+
+    Raises
+    ------
+    InvalidParameter
+        An unknown name or an object without ``solve``.
+    MissingDependency
+        ``"cholmod"`` without scikit-sparse installed.
+    """
+    if spec is None:
+        return AutoSolver()
+    if isinstance(spec, str):
+        if spec == "cholmod":
+            from .cholmod import CholmodSolver
+
+            return CholmodSolver()
+        named = {"auto": AutoSolver, "direct": DirectSolver, "amg": AMGSolver}.get(spec)
+        if named is None:
+            raise InvalidParameter(
+                f"unknown linear solver {spec!r}: use one of {', '.join(LINEAR_SOLVER_NAMES)}, "
+                "or a solver object such as fe.DirectSolver()."
+            )
+        return named()
+    if not callable(getattr(spec, "solve", None)):
+        raise InvalidParameter(
+            f"linear_solver must be a name ({', '.join(LINEAR_SOLVER_NAMES)}) or a solver object "
+            f"with solve(A, b, near_null), got {spec!r}."
+        )
+    return spec

@@ -33,12 +33,18 @@ from __future__ import annotations
 import logging
 import math
 
+from typing import TYPE_CHECKING, Literal, overload
+
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import InvalidParameter, UnderConstrained
+
+if TYPE_CHECKING:  # for annotations only
+    from ..physics.multibody import AnyModel
+    from .solver_types import SteppingScheme
 
 __all__ = ["natural_frequencies", "max_frequency", "critical_time_step", "modal_critical_time_step"]
 
@@ -199,7 +205,21 @@ def _start_vector(n: int) -> np.ndarray:
 
 
 # -- public -------------------------------------------------------------------------------------
-def natural_frequencies(model, n: int = 6, *, x=None, mass: str = "consistent", return_modes: bool = False):
+@overload
+def natural_frequencies(model: AnyModel, n: int = 6, *, x: np.ndarray | None = None,
+                        mass: Literal["consistent", "lumped"] = "consistent",
+                        return_modes: Literal[False] = False) -> np.ndarray: ...
+
+
+@overload
+def natural_frequencies(model: AnyModel, n: int = 6, *, x: np.ndarray | None = None,
+                        mass: Literal["consistent", "lumped"] = "consistent",
+                        return_modes: Literal[True]) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+def natural_frequencies(model: AnyModel, n: int = 6, *, x: np.ndarray | None = None,
+                        mass: Literal["consistent", "lumped"] = "consistent",
+                        return_modes: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """The n lowest natural frequencies (Hz) of small vibrations about x.
 
     Solves ``K phi = omega^2 M phi`` on the free DOFs with ARPACK in
@@ -283,7 +303,12 @@ def natural_frequencies(model, n: int = 6, *, x=None, mass: str = "consistent", 
         lam, phi = sla.eigh(K.toarray(), Mf.toarray(), subset_by_index=[0, n - 1])
     else:
         sigma = -_FREE_SHIFT * scale if _is_free_body(model) else 0.0
-        lam, phi = spla.eigsh(K, k=n, M=Mf, sigma=sigma, which="LM", v0=_start_vector(nfree))
+        # K - sigma M factorised once, by CHOLMOD where installed (else ARPACK's SuperLU)
+        from .cholmod import shift_invert_operator
+
+        OPinv = shift_invert_operator((K - sigma * Mf).tocsr() if sigma else K)
+        lam, phi = spla.eigsh(K, k=n, M=Mf, sigma=sigma, which="LM", v0=_start_vector(nfree),
+                              OPinv=OPinv)
     order = np.argsort(lam)
     lam, phi = lam[order], phi[:, order]
     bad = lam < -_NEGATIVE_TOL * scale
@@ -305,7 +330,9 @@ def natural_frequencies(model, n: int = 6, *, x=None, mass: str = "consistent", 
     return f, modes
 
 
-def max_frequency(model, *, x=None, mass: str = "lumped", upper_bound: bool = False) -> float:
+def max_frequency(model: AnyModel, *, x: np.ndarray | None = None,
+                  mass: Literal["consistent", "lumped"] = "lumped",
+                  upper_bound: bool = False) -> float:
     """The highest angular frequency omega_max (rad/s) of the free DOFs.
 
     omega_max^2 is the largest eigenvalue of ``M^-1 K`` (K the Hessian of
@@ -450,7 +477,8 @@ def modal_critical_time_step(integrator, omega: float, zeta: float = 0.0) -> flo
     return lo
 
 
-def critical_time_step(model, integrator, *, x=None, safety: float = 1.0) -> float:
+def critical_time_step(model: AnyModel, integrator: SteppingScheme, *, x: np.ndarray | None = None,
+                       safety: float = 1.0) -> float:
     """Largest stable time step (s) of an integrator on a model.
 
     Implicit integrators (``integrator.explicit`` False) return

@@ -67,7 +67,8 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from .linear_solvers import AMGSolver, AutoSolver, LinearSolverFailed, ReusedAMG, SingularMatrix
+from .linear_solvers import (AMGSolver, AutoSolver, LinearSolverFailed, ReusedAMG,
+                             SingularMatrix, as_linear_solver)
 
 __all__ = ["NewtonResult", "newton_minimize"]
 
@@ -247,9 +248,10 @@ def newton_minimize(
     -------
     NewtonResult
     """
-    solver = linear_solver if linear_solver is not None else AutoSolver()
+    solver = as_linear_solver(linear_solver)  # None: AutoSolver(); a name: its solver
     if _REUSE_AMG and isinstance(solver, AutoSolver):  # one AMG hierarchy for the whole solve
-        solver = solver.reusing(len(free))
+        indptr = getattr(pattern, "indptr", None)  # a stacked (multi-body) pattern has no CSR of its own
+        solver = solver.reusing(len(free), None if indptr is None else int(indptr[-1]))
     elif _REUSE_AMG and isinstance(solver, AMGSolver):
         solver = solver.reusing()
     x = np.array(x0, dtype=float)

@@ -39,16 +39,23 @@ import math
 import time
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, Literal, TypedDict, cast
 
 import numpy as np
 
 from ..errors import InvalidParameter, NotConverged
 from ..physics.impulse_contact import reject_impulse_contact
-from .linear_solvers import AutoSolver, LinearSolverFailed, SingularMatrix
+from .linear_solvers import LinearSolverFailed, SingularMatrix, as_linear_solver
 from .newton import constrain, newton_minimize
 from .stability import UnstableEquilibrium, lowest_eigenpair
 from .static_view import StaticResultView
+
+if TYPE_CHECKING:  # for annotations only
+    from typing import Unpack  # Python >= 3.11
+
+    from ..physics.multibody import AnyModel, BodyBoundary
+    from ..physics.supports import Where
+    from .solver_types import LinearSolver
 
 __all__ = ["EquilibriumPoint", "LoadPath", "RoundoffWarning", "StaticResult", "UnstableEquilibrium",
            "load_path", "solve_static"]
@@ -151,7 +158,7 @@ class EquilibriumPoint:
     stable: bool | None = None
     _model: Any = field(default=None, repr=False, compare=False)  # the Model solved
 
-    def reaction_force(self, where) -> np.ndarray:
+    def reaction_force(self, where: Where | BodyBoundary) -> np.ndarray:
         """Total reaction (N), ``(3,)``, on a boundary name, names, vertex indices or mask.
 
         Sums the reactions of every node of the boundary; a node shared by two
@@ -190,7 +197,7 @@ class LoadPath(list):
     def min_eigenvalues(self) -> np.ndarray:
         return np.array([np.nan if p.min_eigenvalue is None else p.min_eigenvalue for p in self])
 
-    def reaction_forces(self, where) -> np.ndarray:
+    def reaction_forces(self, where: Where | BodyBoundary) -> np.ndarray:
         return np.stack([p.reaction_force(where) for p in self]) if self else np.zeros((0, 3))
 
 
@@ -268,7 +275,7 @@ class StaticResult(StaticResultView):
     perturbations: int = 0
     _model: Any = field(default=None, repr=False, compare=False)  # the Model solved
 
-    def reaction_force(self, where) -> np.ndarray:
+    def reaction_force(self, where: Where | BodyBoundary) -> np.ndarray:
         """Total reaction (N), ``(3,)``, on a boundary name, names, vertex indices or mask.
 
         Examples
@@ -386,18 +393,38 @@ def _predictor(model, problem, x, s, target, solver, near_null, pattern, seconds
     return best, 1 if best is not plain else 0
 
 
+class StaticOptions(TypedDict, total=False):
+    """The keywords of :func:`solve_static` besides the model (for ``load_path(model, **kw)``)."""
+
+    rtol: float
+    max_iter: int
+    linear_solver: LinearSolver | None
+    project: bool
+    initial_load_step: float
+    min_load_step: float
+    check: bool
+    stability: bool | Literal["final", "path"] | None
+    stabilize: bool
+
+
+class SolveOptions(StaticOptions, total=False):
+    """Every keyword of :func:`solve_static` (for ``BuiltRun.solve(**options)``)."""
+
+    steps: int | None
+
+
 def solve_static(
-    model,
+    model: AnyModel,
     *,
     rtol: float = 1e-8,
     max_iter: int = 30,
-    linear_solver=None,
+    linear_solver: LinearSolver | None = None,
     project: bool = True,
     initial_load_step: float = 1.0,
     min_load_step: float = 1.0 / 1024,
     check: bool = True,
     steps: int | None = None,
-    stability="final",
+    stability: bool | Literal["final", "path"] | None = "final",
     stabilize: bool = False,
 ) -> StaticResult:
     """Static equilibrium of a model under its loads and prescribed displacements.
@@ -417,8 +444,9 @@ def solve_static(
     max_iter : int
         Most Newton iterations per load step.
     linear_solver : object, optional
-        ``fe.DirectSolver()``, ``fe.AMGSolver()`` or the default
-        ``fe.AutoSolver()`` (direct below 20k DOFs, AMG-CG above).
+        ``fe.DirectSolver()``, ``fe.AMGSolver()``, ``fe.CholmodSolver()`` or the
+        default ``fe.AutoSolver()`` (its docstring has the rule), or one of their
+        names ``"direct"``, ``"amg"``, ``"cholmod"``, ``"auto"``.
     project : bool
         Project the tangent to positive semi-definite per quadrature point
         while far from equilibrium (guarantees a descent direction under
@@ -483,7 +511,7 @@ def solve_static(
         memory_check("auto")
     _check_conditioning(model)
     t_start = time.perf_counter()
-    solver = linear_solver if linear_solver is not None else AutoSolver()
+    solver = as_linear_solver(linear_solver)  # None: AutoSolver(); a name: its solver
     problem = _Problem(model)
     free = problem.free
     g_scale_full = problem.f_scale + problem.u_scale
@@ -729,7 +757,7 @@ def _check_final(model, problem, total, x, free, near_null, stabilize, solver, p
     return x
 
 
-def load_path(model, steps: int = 10, **kwargs) -> LoadPath:
+def load_path(model: AnyModel, steps: int = 10, **kwargs: Unpack[StaticOptions]) -> LoadPath:
     """The converged points of ``solve_static(model, steps=steps, **kwargs)``: a :class:`LoadPath`.
 
     Examples
