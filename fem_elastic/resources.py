@@ -39,20 +39,26 @@ from pathlib import Path
 
 from .errors import InvalidParameter, ResourceLimit
 
-__all__ = ["BYTES_PER_TET", "MODEL_BYTES_PER_TET", "available_memory", "free_disk", "model_memory", "check_memory",
+__all__ = ["BYTES_PER_TET", "FUSED_BYTES_PER_TET", "MODEL_BYTES_PER_TET", "available_memory", "free_disk", "model_memory", "check_memory",
            "check_disk", "check_input_file", "format_bytes", "MEMORY_ENV", "DISK_ENV"]
 
 MEMORY_ENV = "FEM_ELASTIC_MEMORY_LIMIT"
 DISK_ENV = "FEM_ELASTIC_DISK_LIMIT"
 
-#: Peak bytes per tet of building a Model and one ``linearize`` (element matrices, the CSR
-#: scatter map, quadrature tensors), by element order: measured with tracemalloc on beam
-#: meshes of 1920 and 8640 tets (P1: 6.3-6.4 kB; P2: 29.2-29.5 kB per tet), rounded up.
-BYTES_PER_TET = {1: 7_000, 2: 32_000}
+#: Peak bytes per tet of building a Model and one ``linearize`` through the numpy path (element
+#: matrices, the CSR scatter map, quadrature tensors), by element order: measured with
+#: tracemalloc on beam meshes of 4320 and 15360 tets (P1: 4.96-4.98 kB; P2: 26.1 kB per tet;
+#: 6.3 and 29.5 kB before issue 19's lazy scatter map), rounded up.
+BYTES_PER_TET = {1: 6_000, 2: 30_000}
+#: The same through the fused numba kernels (``fem_elastic.discretization.fused``: the element
+#: matrices go straight into the CSR data, through an int32 block map): measured on the same
+#: meshes, P1 1.27-1.29 kB, P2 9.6-9.8 kB per tet, and 1.59 kB per P1 tet on a 540-tet beam
+#: (fixed costs weigh more there), rounded up.
+FUSED_BYTES_PER_TET = {1: 1_800, 2: 12_000}
 #: Peak bytes per tet of building a Model alone (mesh, space, mass, per-element data, one
-#: gradient; no tangent): measured with tracemalloc on beam meshes of 8640 and 15360 P1 tets
-#: (1.81 kB per tet) and of 540 and 1920 P2 tets (10.7 kB per tet), rounded up.
-MODEL_BYTES_PER_TET = {1: 2_500, 2: 12_000}
+#: gradient; no tangent): measured with tracemalloc on beam meshes of 4320 and 15360 tets
+#: (P1 0.99-1.00 kB, P2 3.04-3.06 kB per tet), rounded up.
+MODEL_BYTES_PER_TET = {1: 1_200, 2: 3_500}
 #: Nonzeros of the assembled stiffness per tet (measured on the same meshes: P1 26-29, P2 384-400).
 NNZ_PER_TET = {1: 30, 2: 400}
 #: The automatic solver's largest direct solve (``fem_elastic.solvers.linear_solvers.AutoSolver``).
@@ -117,7 +123,7 @@ def free_disk(path) -> int | None:
 
 
 def model_memory(n_tets: int, n_vertices: int, order: int = 1, solver: str = "auto",
-                 tangent: bool = True) -> dict:
+                 tangent: bool = True, fused: bool = False) -> dict:
     """Estimated peak memory of a model and its linear solves (bytes), by part.
 
     Parameters
@@ -136,6 +142,10 @@ def model_memory(n_tets: int, n_vertices: int, order: int = 1, solver: str = "au
         ``solver``'s share; False: the model's own share alone (:data:`MODEL_BYTES_PER_TET`:
         mesh, space, mass, per-element data), no matrix and no solver.
 
+    fused : bool
+        True: the tangent is assembled by the fused numba kernels (:data:`FUSED_BYTES_PER_TET`,
+        about a quarter of the numpy path's :data:`BYTES_PER_TET`).
+
     Returns
     -------
     dict
@@ -153,7 +163,7 @@ def model_memory(n_tets: int, n_vertices: int, order: int = 1, solver: str = "au
     n_nodes = n_vertices if order == 1 else 2 * n_vertices + n_tets  # edges ~ vertices + tets (Euler)
     ndof = 3 * n_nodes
     nnz = NNZ_PER_TET[order] * n_tets
-    model = (BYTES_PER_TET if tangent else MODEL_BYTES_PER_TET)[order] * n_tets
+    model = ((FUSED_BYTES_PER_TET if fused else BYTES_PER_TET) if tangent else MODEL_BYTES_PER_TET)[order] * n_tets
     if not tangent:
         solver = "none"
     if solver == "auto":

@@ -346,7 +346,7 @@ def _with_env(name, value, call):
 
 
 def _too_big(tmp):
-    return _with_env("FEM_ELASTIC_MEMORY_LIMIT", "1M", lambda: fe.Model(
+    return _with_env("FEM_ELASTIC_MEMORY_LIMIT", "256K", lambda: fe.Model(
         fe.beam_mesh(cells=(10, 3, 3)), density=1000.0, body=_body(), fixed="left"))
 
 
@@ -677,7 +677,7 @@ BAD_INPUTS: list[BadInput] = [
              "would need about", "Use a coarser mesh",
              note="before any assembly (the model's own share; its tangent and linear solver's before a static "
              "solve, an implicit run or a modal analysis), carrying .needed and .available (bytes)",
-             check=_check_limit(2**20)),
+             check=_check_limit(2**18)),
     BadInput("a series larger than the free disk", _disk_full, fe.ResourceLimit,
              "would need about", "Record fewer frames ([output] every = N)",
              note="before the first frame is written, carrying .needed and .available (bytes)",

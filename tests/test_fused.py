@@ -102,9 +102,11 @@ def test_registry_covers_the_closed_form_materials():
 
 @needs_numba
 @pytest.mark.parametrize("material", [fe.Corotated(E, NU)], ids=["Corotated"])
-def test_unregistered_material_and_p2_take_the_numpy_path(material):
+def test_unregistered_material_takes_the_numpy_path(material):
     assert fused.kernels_for(material, space()) is None
-    assert fused.kernels_for(fe.NeoHookean(E, NU), space(2)) is None
+    assert fused.kernels_for(material, space(2)) is None
+    # P2 has its own fused kernels (tests/test_fused_p2.py)
+    assert not isinstance(fused.kernels_for(fe.NeoHookean(E, NU), space(2)), fused.FusedP1)
 
     class Custom(fe.NeoHookean):  # a subclass may change psi: exact classes only
         pass

@@ -12,11 +12,16 @@ one pass over the elements does, per tet,
     F_e = I + Ds Dm^-1,   C_e = dP/dF(F_e)  (9x9, ``C[3 i + j, 3 k + l] = dP_ij/dF_kl``),
     C_e <- nearest PSD matrix of C_e  (optional),
     K_e[3 a + i, 3 b + k] = V_e sum_jl dN_a,j C_e[3 i + j, 3 k + l] dN_b,l,
-    data[index[e, r, c]] += K_e[r, c],
+    data[indptr[3 n_a + i] + off[e, a, b] + k] += K_e[3 a + i, 3 b + k],
 
-with ``index`` the ``(ne, 12, 12)`` map of each element entry into the data array
-of the space's fixed :class:`~fem_elastic.discretization.space.SparsityPattern`
-(int32 where the data array allows it). Only one 9x9 and one 12x12 buffer exist.
+into the CSR data of the space's fixed
+:class:`~fem_elastic.discretization.space.SparsityPattern`: the three rows of a node
+list the same columns, so ``off[e, a, b]``, the position of column ``3 n_b`` in row
+``3 n_a`` from its start, places the whole 3x3 block. ``off`` is an ``(ne, 4, 4)``
+int32 map built once per pattern by binary search (:func:`block_offsets`; 64 bytes an
+element: 9.4 MiB at 153,600 tets, where an ``(ne, 12, 12)`` map of every entry took
+84 MiB and the pattern's int64 ``scatter``, which this path never builds, 169 MiB).
+Only one 9x9 and a few small buffers exist.
 
 Projection: the numpy path projects **per quadrature point**, on the 9x9 ``dP/dF``
 (``Material.d2psi_dF2_psd``: the points already PSD keep the exact tangent, the
@@ -359,8 +364,9 @@ def tangent_points(kind, F, prm, project, out):
 
 # element loop -------------------------------------------------------------------------
 @_jit
-def hessian_p1(x, X, nodes, Dm_inv, V, kind, prm, project, index, data):
-    """data = the CSR data of sum_e K_e, K_e scattered through ``index`` (ne, 12, 12) as built.
+def hessian_p1(x, X, nodes, Dm_inv, V, kind, prm, project, indptr, off, data):
+    """data = the CSR data of sum_e K_e, K_e's 3x3 blocks placed by ``off`` (ne, 4, 4) in the rows
+    of ``indptr`` (see the module notes).
 
     ``project``: replace each element's C by its nearest PSD matrix (not for LINEAR,
     whose tangent is PSD). data is overwritten.
@@ -390,46 +396,72 @@ def hessian_p1(x, X, nodes, Dm_inv, V, kind, prm, project, index, data):
                         c = 3 * k
                         T[i, j, b, k] = v * (C[r, c] * dN[b, 0] + C[r, c + 1] * dN[b, 1]
                                              + C[r, c + 2] * dN[b, 2])
-        ie = index[e]
         for a in range(4):
             for i in range(3):
-                row = ie[3 * a + i]
+                start = indptr[3 * nodes[e, a] + i]
                 for b in range(4):
+                    pos = start + off[e, a, b]
                     for k in range(3):
-                        data[row[3 * b + k]] += (dN[a, 0] * T[i, 0, b, k] + dN[a, 1] * T[i, 1, b, k]
-                                                 + dN[a, 2] * T[i, 2, b, k])
+                        data[pos + k] += (dN[a, 0] * T[i, 0, b, k] + dN[a, 1] * T[i, 1, b, k]
+                                          + dN[a, 2] * T[i, 2, b, k])
+
+
+@_jit
+def block_offsets(nodes, indptr, indices, off):
+    """off[e, a, b] = position of column ``3 nodes[e, b]`` in CSR row ``3 nodes[e, a]``, from its start.
+
+    Binary search in the sorted column indices of the row; -1 if absent (the
+    caller checks: the pattern was not built on these elements).
+    """
+    for e in range(nodes.shape[0]):
+        for a in range(nodes.shape[1]):
+            lo0 = indptr[3 * nodes[e, a]]
+            hi0 = indptr[3 * nodes[e, a] + 1]
+            for b in range(nodes.shape[1]):
+                c = 3 * nodes[e, b]
+                lo, hi = lo0, hi0
+                while lo < hi:
+                    mid = (lo + hi) // 2
+                    if indices[mid] < c:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                off[e, a, b] = lo - lo0 if lo < hi0 and indices[lo] == c else -1
 
 
 # the map into the CSR data ------------------------------------------------------------
-#: SparsityPattern -> its (ne, 12, 12) data-index map; dropped with the pattern.
-_index_cache: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+#: SparsityPattern -> its (ne, 4, 4) block-offset map; dropped with the pattern.
+_offset_cache: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
-def element_index(pattern) -> np.ndarray:
-    """``(ne, 12, 12)`` position in ``pattern``'s CSR data of each P1 element-matrix entry.
+def element_offsets(pattern, nodes: np.ndarray) -> np.ndarray:
+    """``(ne, 4, 4)`` int32 offset of each element's node blocks within their CSR rows (cached).
 
-    Built once per pattern from its ``scatter`` (``(a, i, b, k, e)`` order), element-major
-    so one element's 144 positions are contiguous; int32 where the data array has fewer
-    than 2^31 entries (84 MiB at 153,600 tets instead of 169 MiB).
+    Built once per pattern by :func:`block_offsets` (an element's entry
+    ``(3 a + i, 3 b + k)`` sits at ``indptr[3 nodes[e, a] + i] + off[e, a, b] + k``).
 
     Parameters
     ----------
     pattern : SparsityPattern
-        Of a P1 space (4 nodes per element).
+        Of the P1 space whose element vertices are ``nodes``.
+    nodes : numpy.ndarray
+        ``(ne, 4)`` vertex indices.
 
     Returns
     -------
     numpy.ndarray
         Read-only, C-contiguous.
     """
-    index = _index_cache.get(pattern)
-    if index is None:
-        dtype = np.int32 if pattern.nnz < 2**31 - 1 else np.int64
-        index = np.ascontiguousarray(pattern.scatter.reshape(12, 12, -1).transpose(2, 0, 1),
-                                     dtype=dtype)
-        index.setflags(write=False)
-        _index_cache[pattern] = index
-    return index
+    off = _offset_cache.get(pattern)
+    if off is None:
+        off = np.empty(nodes.shape + (nodes.shape[1],), dtype=np.int32)
+        block_offsets(nodes, pattern.indptr, pattern.indices, off)
+        if off.size and off.min() < 0:
+            raise ValueError("the sparsity pattern does not hold every element's node pairs: "
+                             "it was built for another discretization")
+        off.setflags(write=False)
+        _offset_cache[pattern] = off
+    return off
 
 
 def hessian(fused, x: np.ndarray, pattern, project: bool):
@@ -455,5 +487,5 @@ def hessian(fused, x: np.ndarray, pattern, project: bool):
     g = fused.geo
     data = np.empty(pattern.nnz)
     hessian_p1(fused._x(x), g.X, g.nodes, g.Dm_inv, g.V, fused.kind, fused.prm, bool(project),
-               element_index(pattern), data)
+               pattern.indptr, element_offsets(pattern, g.nodes), data)
     return sp.csr_matrix((data, pattern.indices, pattern.indptr), shape=pattern.shape, copy=False)

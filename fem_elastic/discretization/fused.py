@@ -1,5 +1,9 @@
 """Fused numba kernels for the elastic energy and force of linear (P1) tets.
 
+Quadratic (P2) tets have their own kernels, in :mod:`._fused_p2_kernels` (energy,
+force and tangent, per quadrature point); :func:`kernels_for` hands them out for a
+space of order 2 under the same switches.
+
 The numpy path of :class:`fem_elastic.physics.elastic_body.ElasticPotential` builds
 the deformation gradient of every element, then the stress of every
 element, then the element forces, each as a ``(3, 3, nelems)`` or
@@ -56,13 +60,16 @@ import logging
 import os
 import weakref
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
 from .space import Discretization
 from ..materials import LinearElastic, NeoHookean, StableNeoHookean, StVK
 from ..materials.base import Material
+
+if TYPE_CHECKING:  # imported on first use only (it imports numba)
+    from ._fused_p2_kernels import FusedP2
 
 __all__ = ["available", "threaded", "kernels_for", "registry", "FusedP1", "MaterialKernels", "warped_apply",
            "tet_volume_ratios"]
@@ -292,6 +299,8 @@ def _frozen(a: np.ndarray, dtype) -> np.ndarray:
 _cache: "weakref.WeakKeyDictionary[Discretization, tuple[_P1Geometry, dict]]" = (
     weakref.WeakKeyDictionary()
 )
+#: P2 Discretization -> {material: FusedP2}; dropped with the Discretization.
+_p2_cache: "weakref.WeakKeyDictionary[Discretization, dict]" = weakref.WeakKeyDictionary()
 
 
 class FusedP1:
@@ -373,11 +382,13 @@ class FusedP1:
         return _fused_tangent_kernels.hessian(self, x, pattern, project)
 
 
-def kernels_for(material: Material, space: Discretization) -> FusedP1 | None:
+def kernels_for(material: Material, space: Discretization) -> "FusedP1 | FusedP2 | None":
     """The fused kernels for a material on a discretization, or None for the numpy path.
 
-    None unless the space is P1, the material's exact class is registered
-    (see :func:`registry`) and :func:`available` is true.
+    None unless the material's exact class is registered (see :func:`registry`)
+    and :func:`available` is true. A P1 space gets a :class:`FusedP1`, a P2 space a
+    :class:`~fem_elastic.discretization._fused_p2_kernels.FusedP2` (energy, gradient
+    and tangent with the same methods; imported here, on first use).
 
     Parameters
     ----------
@@ -386,10 +397,18 @@ def kernels_for(material: Material, space: Discretization) -> FusedP1 | None:
 
     Returns
     -------
-    FusedP1 or None
+    FusedP1, FusedP2 or None
     """
-    if space.order != 1 or type(material) not in _REGISTRY or not available():
+    if space.order not in (1, 2) or type(material) not in _REGISTRY or not available():
         return None
+    if space.order == 2:
+        from . import _fused_p2_kernels
+
+        by_material = _p2_cache.setdefault(space, {})
+        p2 = by_material.get(material)
+        if p2 is None:
+            p2 = by_material[material] = _fused_p2_kernels.FusedP2(material, space)
+        return p2
     entry = _cache.get(space)
     if entry is None:
         entry = _cache[space] = (_P1Geometry(space), {})

@@ -73,25 +73,14 @@ class SparsityPattern:
         cols = np.broadcast_to(nodes[None, :, :], (nl, nl, ne)).ravel()
         graph = sp.csr_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(nn, nn))
         graph.sum_duplicates()  # sorts the column indices of each row
+        del rows, cols
         sptr = graph.indptr.astype(np.int64)
         deg = np.diff(sptr)
         node_row = np.repeat(np.arange(nn, dtype=np.int64), deg)
-        keys = node_row * nn + graph.indices
-        # position of each element node pair (a, b) in the node graph's CSR data
-        spos = np.searchsorted(keys, rows.astype(np.int64) * nn + cols).reshape(nl, nl, ne)
-        rank = spos - sptr[nodes][:, None, :]  # rank of node b within row a
-        # DOF row 3n+i holds 3 deg(n) entries, starting at 9 sptr[n] + 3 i deg(n);
-        # entry (3n+i, 3m+k) is at that start + 3 rank(m in row n) + k.
-        base = 9 * sptr[nodes]  # (nl, ne)
-        d3 = 3 * deg[nodes]
         i3 = np.arange(3)
-        scatter = (
-            base[:, None, None, None, :]
-            + i3[None, :, None, None, None] * d3[:, None, None, None, :]
-            + 3 * rank[:, None, :, None, :]
-            + i3[None, None, None, :, None]
-        )  # (a, i, b, k, e)
-        self.scatter = scatter.reshape(-1)
+        # the node graph and the element nodes: what ``scatter`` is built from, on first use (the
+        # fused tangents never read it: 144 int64 per P1 element, 169 MiB at 153,600 tets)
+        self._graph = (nodes, sptr, node_row * nn + graph.indices)
         self.indptr = np.concatenate([[0], np.cumsum(np.repeat(3 * deg, 3))]).astype(np.int64)
         # Column indices: DOF row 3n+i lists 3m+k for the nodes m of node row n
         # (sorted), k = 0, 1, 2; the same list for i = 0, 1, 2.
@@ -108,9 +97,42 @@ class SparsityPattern:
         self.indptr = self.indptr.astype(itype)
         self.shape = (ndofs, ndofs)
         self.nnz = idx.size
-        self._row_of = np.repeat(np.arange(ndofs, dtype=np.int64), np.diff(self.indptr))
         self._touching_cache: tuple[int | None, np.ndarray | None] = (None, None)
         self._positions_cache: tuple[object, np.ndarray | None] | None = None
+
+    @cached_property
+    def scatter(self) -> np.ndarray:
+        """Position in the CSR data of each element-matrix entry, ``(a, i, b, k, e)`` order, int64.
+
+        Built on first use (the numpy assembly path, :meth:`assemble`): the
+        fused kernels place their entries without it.
+        """
+        nodes, sptr, keys = self._graph
+        nl, ne = nodes.shape
+        nn = sptr.size - 1
+        deg = np.diff(sptr)
+        # position of each element node pair (a, b) in the node graph's CSR data
+        pairs = nodes[:, None, :].astype(np.int64) * nn + nodes[None, :, :]
+        spos = np.searchsorted(keys, pairs.ravel()).reshape(nl, nl, ne)
+        del pairs
+        rank = spos - sptr[nodes][:, None, :]  # rank of node b within row a
+        # DOF row 3n+i holds 3 deg(n) entries, starting at 9 sptr[n] + 3 i deg(n);
+        # entry (3n+i, 3m+k) is at that start + 3 rank(m in row n) + k.
+        base = 9 * sptr[nodes]  # (nl, ne)
+        d3 = 3 * deg[nodes]
+        i3 = np.arange(3)
+        scatter = (
+            base[:, None, None, None, :]
+            + i3[None, :, None, None, None] * d3[:, None, None, None, :]
+            + 3 * rank[:, None, :, None, :]
+            + i3[None, None, None, :, None]
+        )  # (a, i, b, k, e)
+        return scatter.reshape(-1)
+
+    @cached_property
+    def _row_of(self) -> np.ndarray:
+        """The row of each stored entry, ``(nnz,)`` int64 (built on first use)."""
+        return np.repeat(np.arange(self.shape[0], dtype=np.int64), np.diff(self.indptr))
 
     def owns(self, A) -> bool:
         """Whether the sparse matrix ``A`` was assembled on this pattern."""

@@ -113,7 +113,7 @@ class ElasticPotential(Potential):
         Basis, quadrature and DOF maps.
     """
 
-    def __init__(self, material: Material, space: Discretization):
+    def __init__(self, material: Material, space: Discretization) -> None:
         self.material = material
         self.space = space
 
@@ -126,7 +126,7 @@ class ElasticPotential(Potential):
         return self.material.psi(self.F(x))
 
     def _fused(self):
-        """The fused numba kernels of :mod:`fem_elastic.discretization.fused` (P1, registered
+        """The fused numba kernels of :mod:`fem_elastic.discretization.fused` (P1 or P2, registered
         materials, numba importable, ``FEM_ELASTIC_NUMBA`` not 0), or None: numpy path."""
         from ..discretization import fused  # numba itself is imported there, on first use only
 
@@ -202,7 +202,8 @@ class ElasticPotential(Potential):
         C = self.material.d2psi_dF2_psd(F) if project else self.material.d2psi_dF2(F)
         return self.space.pattern.assemble(self.element_stiffness(C))
 
-    def linearize(self, x: np.ndarray, project: bool = False):
+    def linearize(self, x: np.ndarray,
+                  project: bool = False) -> tuple[np.ndarray, sp.spmatrix | None]:
         kernels = self._fused()
         if kernels is not None:
             return kernels.gradient(x), kernels.hessian(x, self.space.pattern, project)

@@ -23,11 +23,13 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
+from numpy.typing import ArrayLike
 
 from ..discretization.space import Discretization
 from ..errors import InvalidParameter, UnderConstrained
@@ -36,6 +38,24 @@ from .supports import describe_rigid_modes, nodes_of, resolve_displacement, reso
 from ..discretization.mass import consistent_mass, lumped_mass
 from ..geometry.mesh import validate_mesh
 from ..resources import check_memory, model_memory
+
+if TYPE_CHECKING:  # for annotations only (pyvista is optional; the others import this module)
+    from typing import Unpack  # Python >= 3.11
+
+    import pyvista
+    from skfem import MeshTet
+
+    from .collision_surface import CollisionSurface
+    from .damping import Rayleigh
+    from .driven import Motion
+    from .elastic_body import ElasticBody
+    from .impulse_contact import ImpulseContact
+    from .ipc_contact import IPCContact
+    from .obstacles import Obstacle
+    from .potential import Potential
+    from .pyvista_grid import PlotOptions
+    from .springs import MassSpring
+    from .supports import DisplacementSpec, FixedSpec, Where
 
 __all__ = ["Model"]
 
@@ -132,9 +152,13 @@ class Model:
     """
 
     def __init__(
-        self, mesh, density, body, fixed=None, gravity=None, traction=None,
-        ground=None, damping=None, driven=None, displacement=None, contact=None,
-    ):
+        self, mesh: MeshTet, density: float, body: ElasticBody | MassSpring,
+        fixed: FixedSpec | None = None, gravity: ArrayLike | None = None,
+        traction: Mapping[str, ArrayLike] | None = None,
+        ground: Obstacle | Sequence[Obstacle] | None = None, damping: Rayleigh | None = None,
+        driven: Mapping[str, Motion] | None = None, displacement: DisplacementSpec | None = None,
+        contact: IPCContact | ImpulseContact | None = None,
+    ) -> None:
         validate_mesh(mesh)
         # memory, from the counts alone: a model that cannot fit says so now, not after minutes;
         # its own share only (the tangent and the solver are checked at the first linearize)
@@ -197,7 +221,7 @@ class Model:
         self.contact = bind_contact(self, contact)
 
     # contact between bodies (the ``contact=`` argument) --------------------------------------
-    def collision_surface(self):
+    def collision_surface(self) -> CollisionSurface:
         """The boundary triangles of the mesh on the model's DOFs (cached), for contact.
 
         See :func:`fem_elastic.physics.collision_surface.collision_surface`:
@@ -248,7 +272,8 @@ class Model:
 
         return html_table("Model", model_rows(self))
 
-    def to_pyvista(self, x: np.ndarray | None = None, v: np.ndarray | None = None):
+    def to_pyvista(self, x: np.ndarray | None = None,
+                   v: np.ndarray | None = None) -> pyvista.UnstructuredGrid:
         """The body at DOF positions ``x`` (default: at rest) as a pyvista ``UnstructuredGrid``.
 
         Reference points, point data ``displacement`` (m) and ``velocity`` (m/s),
@@ -259,7 +284,8 @@ class Model:
 
         return body_grid(self, x, v)
 
-    def plot(self, x: np.ndarray | None = None, **kwargs):
+    def plot(self, x: np.ndarray | None = None,
+             **kwargs: Unpack[PlotOptions]) -> pyvista.Plotter:
         """Draw the body (at ``x``, default at rest) with pyvista; returns the plotter.
 
         Keywords go to :func:`fem_elastic.physics.pyvista_grid.plot_grid`
@@ -386,7 +412,7 @@ class Model:
         return WarpedStiffness(self.space, material)
 
     # contact and driven boundaries ---------------------------------------------------
-    def respond_contacts(self, x: np.ndarray, v: np.ndarray):
+    def respond_contacts(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Apply the impulse responses: obstacles with ``method="impulse"``, then an
         impulse ``contact=`` (``fe.ImpulseContact``, between bodies and self-contact); (x, v)."""
         for obstacle in self.obstacles:
@@ -396,7 +422,7 @@ class Model:
             x, v = self.contact.respond(x, v, self.lumped_mass[0::3])
         return x, v
 
-    def constraints(self, t: float):
+    def constraints(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """DOFs held at time ``t`` (s), their positions (m) and velocities (m/s).
 
         Fixed DOFs sit at the reference position at rest, prescribed ones at
@@ -548,7 +574,8 @@ class Model:
             g += c * term.gradient(x)
         return g
 
-    def linearize(self, x: np.ndarray, load_factor: float = 1.0, project: bool = True, body=None):
+    def linearize(self, x: np.ndarray, load_factor: float = 1.0, project: bool = True,
+                  body: Potential | None = None) -> tuple[np.ndarray, sp.csr_matrix]:
         """Gradient (N) and Hessian (N/m, CSR) of Pi at x.
 
         ``project=True`` returns the per-point PSD projection of the tangent,
@@ -587,7 +614,9 @@ class Model:
         what = f"the tangent of this model ({nt} tets, order {self.space.order})"
         if solver != "none":
             what += " with its linear solver"
-        check_memory(model_memory(nt, self.mesh.p.shape[1], self.space.order, solver), what)
+        kernels = getattr(self.body_potential, "_fused", None)  # the fused path: registered materials only
+        fused = kernels is not None and kernels() is not None
+        check_memory(model_memory(nt, self.mesh.p.shape[1], self.space.order, solver, fused=fused), what)
         done.add(solver)
 
     # supports -----------------------------------------------------------------
@@ -595,7 +624,7 @@ class Model:
         """Flat, sorted DOFs of a support given as ``fixed`` accepts it (see :mod:`.supports`)."""
         return resolve_fixed(self.space, fixed, what)[0]
 
-    def boundary_nodes(self, where) -> np.ndarray:
+    def boundary_nodes(self, where: Where) -> np.ndarray:
         """Scalar nodes (vertices and P2 edge nodes) of a boundary name, names, indices or mask."""
         return nodes_of(self.space, where, "boundary")
 
