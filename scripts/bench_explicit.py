@@ -11,6 +11,13 @@ thread count of ``--threads`` (default 1 and 2):
   from ``model.free_at`` and ``model.constraints`` every step);
 - ``after``: ``fe.SymplecticEuler().step``: cached inverse mass and held DOFs, force and
   next state in preallocated buffers, the fused gradient on numba's threads;
+- ``numpy update``: ``fe.SymplecticEuler().step`` with the update of the first pass of
+  19.5 (numpy: negate, scale, ``v + h a``, ``x + h v1``, the State's two copies, the next
+  step's finiteness scan), against ``after``, the one numba pass of
+  ``integrators/_symplectic_kernel.py`` (same bits); both step on from their own last State;
+- ``step without force``: the same two steps with the force handed over (as the gradient a
+  step remembers of its last State), so that only the update, the checks and the State are
+  timed;
 - the gradients alone: before, today's serial kernel (``FEM_ELASTIC_NUMBA_THREADS=0``:
   the same bits as before, Dm^-1 read as nine scalars), the threaded kernel.
 
@@ -128,6 +135,7 @@ def run(cells, repeats, thread_counts):
 
     import fem_elastic as fe
     from fem_elastic.discretization import fused
+    from fem_elastic.dynamics.integrators import explicit
 
     from bench_step import bent_state
 
@@ -156,21 +164,61 @@ def run(cells, repeats, thread_counts):
         return call
 
     integrator = fe.SymplecticEuler()
-    before_rows, after_rows, before_cpu, after_cpu = {}, {}, {}, {}
+    numpy_update = fe.SymplecticEuler()
+    # each integrator steps on from its own last State, as in a run (the fused update vouches for
+    # the finiteness of the States it returns, so the next step skips check_state's scan)
+    chain = {"fused": state, "numpy": state}
+
+    def step_fused():
+        chain["fused"] = integrator.step(model, chain["fused"], dt)
+
+    def step_numpy_update():
+        saved = explicit._update_kernel
+        explicit._update_kernel = lambda: None
+        try:
+            chain["numpy"] = numpy_update.step(model, chain["numpy"], dt)
+        finally:
+            explicit._update_kernel = saved
+
+    # the step without its force: the gradient handed over as the one a step remembers (that of
+    # the state it returned last), so what is timed is the update, the checks and the State
+    g_given = kern.gradient(state.x)
+    given = {"fused": fe.SymplecticEuler(), "numpy": fe.SymplecticEuler()}
+    given_chain = {"fused": state, "numpy": state}
+
+    def overhead(which):
+        def call():
+            integ = given[which]
+            integ._gradient = (given_chain[which].x, g_given)
+            saved = explicit._update_kernel
+            if which == "numpy":
+                explicit._update_kernel = lambda: None
+            try:
+                given_chain[which] = integ.step(model, given_chain[which], dt)
+            finally:
+                explicit._update_kernel = saved
+        return call
+
+    before_rows, after_rows, before_cpu, after_cpu, mid_rows, mid_cpu = {}, {}, {}, {}, {}, {}
+    over_rows = {}
     for n in thread_counts:
         numba.set_num_threads(n)
         for value, fn in (("0", lambda: old_gradient(model, state.x)),
                           ("0", lambda: kern.gradient(state.x, out=out)),
                           ("1", lambda: kern.gradient(state.x, out=out)),
                           ("0", lambda: old_step(model, state, dt)),
-                          ("1", lambda: integrator.step(model, state, dt))):
+                          ("1", step_numpy_update),
+                          ("1", step_fused), ("1", overhead("numpy")), ("1", overhead("fused"))):
             with_env(value, fn)()  # warm up: compile or load, build the caches
         fns = {
             "gradient before (old serial kernel)": with_env("0", lambda: old_gradient(model, state.x)),
             "gradient, serial kernel": with_env("0", lambda: kern.gradient(state.x, out=out)),
             "gradient, threaded kernel": with_env("1", lambda: kern.gradient(state.x, out=out)),
             "step before (old path, old kernel)": with_env("0", lambda: old_step(model, state, dt)),
-            "step after (fe.SymplecticEuler)": with_env("1", lambda: integrator.step(model, state, dt)),
+            "step, numpy update (19.5 first pass)": with_env("1", step_numpy_update),
+            "step after (fe.SymplecticEuler)": with_env("1", step_fused),
+            "step without force, numpy update": overhead("numpy"),
+            "step without force, fused update": overhead("fused"),
         }
         times = {k: [] for k in fns}
         cpu = {k: [] for k in fns}
@@ -190,6 +238,10 @@ def run(cells, repeats, thread_counts):
         before_rows[n] = statistics.median(times["step before (old path, old kernel)"])
         after_rows[n] = statistics.median(times["step after (fe.SymplecticEuler)"])
         before_cpu[n] = statistics.median(cpu["step before (old path, old kernel)"])
+        over_rows[n] = tuple(statistics.median(v[f"step without force, {k} update"])
+                             for v in (times, cpu) for k in ("numpy", "fused"))
+        mid_rows[n] = statistics.median(times["step, numpy update (19.5 first pass)"])
+        mid_cpu[n] = statistics.median(cpu["step, numpy update (19.5 first pass)"])
         after_cpu[n] = statistics.median(cpu["step after (fe.SymplecticEuler)"])
     os.environ.pop(env, None)
     # the two paths agree to round-off (one step, serial vs threaded gradient, f / m vs f (1/m))
@@ -208,6 +260,19 @@ def run(cells, repeats, thread_counts):
               f"   speed-up {before_rows[n] / after_rows[n]:.2f} x;   main-thread CPU: before "
               f"{before_cpu[n] * 1e3:6.2f} ms, after {after_cpu[n] * 1e3:6.2f} ms "
               f"({after_cpu[n] * 1e3 / REFERENCE_MS:.2f} x)")
+    print("the fused update alone (same kernel; the numpy update of the first pass of 19.5 against "
+          "the one numba pass that also vouches for finiteness and drops the State copies):")
+    for n in thread_counts:
+        print(f"  {n} thread(s): numpy update {mid_rows[n] * 1e3:6.2f} ms ({mid_rows[n] * 1e3 / REFERENCE_MS:.2f} x)"
+              f"   fused update {after_rows[n] * 1e3:6.2f} ms; main-thread CPU {mid_cpu[n] * 1e3:6.2f} -> "
+              f"{after_cpu[n] * 1e3:6.2f} ms")
+    for n in thread_counts:
+        t_np, t_fu, c_np, c_fu = over_rows[n]
+        print(f"  {n} thread(s), the step without its force: numpy update {t_np * 1e3:.3f} ms, fused "
+              f"{t_fu * 1e3:.3f} ms (main-thread CPU {c_np * 1e3:.3f} -> {c_fu * 1e3:.3f} ms)")
+    a_n, b_n = chain["fused"], chain["numpy"]  # both chains took the same number of steps
+    print(f"  check: the two chains after the same steps are bit-identical: "
+          f"{np.array_equal(a_n.x, b_n.x) and np.array_equal(a_n.v, b_n.v)}")
     if ne != 153_600:
         print("  (the reference is for the ~150k-tet beam: run without --quick/--cells)")
     print(f"  check: before vs after, max relative difference of v1: {dv:.1e}; old and new serial "

@@ -9,11 +9,21 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Union
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import InvalidParameter
+
+if TYPE_CHECKING:  # for annotations only
+    from ..physics.multibody import AnyModel
+
+#: A per-node field: None (zero), one vector for every node, an ``(n_nodes, 3)`` array, or
+#: ``function(X (n_nodes, 3)) -> (n_nodes, 3)`` of the reference node positions.
+NodeField = Union[ArrayLike, Callable[[np.ndarray], ArrayLike], None]
 
 __all__ = ["State"]
 
@@ -67,7 +77,28 @@ class State:
             )
 
     @classmethod
-    def rest(cls, model, *, displacement=None, velocity=None, t: float = 0.0) -> "State":
+    def _adopt(cls, x: np.ndarray, v: np.ndarray, t: float) -> "State":
+        """A State that takes ``x`` and ``v`` as they are, without the copies (for integrators).
+
+        Only for new float64 arrays of shape ``(ndofs,)`` that nobody else
+        holds (an integrator's fresh step result): they are made read-only
+        and become the State's own, as the copies of ``State(x, v, t)`` would.
+        ``t`` must be a finite float.
+        """
+        x.setflags(write=False)
+        v.setflags(write=False)
+        # read-only views of read-only buffers: numpy refuses setflags(write=True) on them, so
+        # the integrator's "checked finite" mark on this State cannot be bypassed by a writer
+        x, v = x[:], v[:]
+        state = object.__new__(cls)
+        object.__setattr__(state, "x", x)
+        object.__setattr__(state, "v", v)
+        object.__setattr__(state, "t", float(t))
+        return state
+
+    @classmethod
+    def rest(cls, model: AnyModel, *, displacement: NodeField = None, velocity: NodeField = None,
+             t: float = 0.0) -> "State":
         """A state of ``model`` built from per-node fields.
 
         Parameters
@@ -88,11 +119,11 @@ class State:
         x[dofs], v[dofs] = xc, vc
         return cls(x, v, t)
 
-    def displacement(self, model) -> np.ndarray:
+    def displacement(self, model: AnyModel) -> np.ndarray:
         """Vertex displacements ``(n_vertices, 3)`` (m)."""
         return model.to_vertices(self.x - model.X)
 
-    def velocity(self, model) -> np.ndarray:
+    def velocity(self, model: AnyModel) -> np.ndarray:
         """Vertex velocities ``(n_vertices, 3)`` (m/s)."""
         return model.to_vertices(self.v)
 

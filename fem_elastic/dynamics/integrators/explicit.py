@@ -81,13 +81,16 @@ from __future__ import annotations
 import logging
 import math
 import numbers
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ...errors import Diverged, InvalidParameter
 from ..state import State
 from .base import Integrator, StepStats, check_dt, check_state
+
+if TYPE_CHECKING:  # for annotations only
+    from ...physics.multibody import AnyModel
 
 __all__ = ["ExplicitEuler", "SymplecticEuler", "Midpoint", "RK4", "ENERGY_GROWTH", "RECHECK_EVERY"]
 
@@ -138,6 +141,11 @@ class _Work:
         self.buffer = np.empty(model.ndofs)  # the force / acceleration
         self.x_next = np.empty(model.ndofs)  # a step's x1 and v1, which State copies
         self.v_next = np.empty(model.ndofs)
+        #: the last State the fused symplectic update returned with every entry finite: the next
+        #: step from it skips check_state's finiteness scan (the update tested it in its pass)
+        self.finite_state = None
+        #: whether impulse contacts change x1, v1 after the update (then it cannot vouch for them)
+        self.responds = _has_impulse_response(model)
         if model.driven:
             self.free = self.held = self.x_held = self.v_held = None
         else:
@@ -163,6 +171,28 @@ class _Work:
         for term, c in model._scaled_terms(1.0)[1:]:
             out += c * term.gradient(x)
         return out
+
+
+def _has_impulse_response(model) -> bool:
+    """Whether ``model.respond_contacts`` may change x, v: an impulse obstacle or contact on the
+    model or, for a multibody scene, on one of its bodies."""
+    for m in (model, *getattr(model, "models", ())):
+        if any(getattr(o, "method", None) == "impulse" for o in getattr(m, "obstacles", ())):
+            return True
+        if getattr(getattr(m, "contact", None), "kind", None) == "impulse":
+            return True
+    return False
+
+
+def _update_kernel():
+    """The numba symplectic Euler update, or None without numba (or with ``FEM_ELASTIC_NUMBA=0``)."""
+    from ...discretization import fused
+
+    if not fused.available():
+        return None
+    from ._symplectic_kernel import symplectic_update
+
+    return symplectic_update
 
 
 def _fused_kernels_of(body):
@@ -208,9 +238,10 @@ class _Explicit(Integrator):
     _anchor: tuple[float, ...] | None
     _gradient: tuple[Any, Any]
     _workspace: _Work | None
+    _model: AnyModel | None  # the model all this is of (None: the next one stepped)
 
     def __init__(self, substep: bool = False, safety: float = 0.8, recheck_every: int = RECHECK_EVERY,
-                 max_substeps: int = 1000):
+                 max_substeps: int = 1000) -> None:
         super().__init__()
         if not isinstance(substep, (bool, np.bool_)):
             raise InvalidParameter(f"substep must be True or False, got {substep!r}.")
@@ -313,10 +344,12 @@ class _Explicit(Integrator):
             self._gradient = (state.x, g)
 
     # -- the scheme ------------------------------------------------------------------------
-    def step(self, model, state: State, dt: float) -> State:
+    def step(self, model: AnyModel, state: State, dt: float) -> State:
         """Advance ``state`` by ``dt`` (s): one step of the scheme, or ``n`` sub-steps with ``substep``."""
         h = check_dt(dt)
-        check_state(model, state)
+        w = self._workspace
+        if w is None or w.model is not model or state is not w.finite_state:
+            check_state(model, state)  # (a state this integrator made and found finite needs no scan)
         stats = self.last_stats = StepStats()
         if not self.substep:
             return self._advance(model, state, h, state.t + h, stats)
@@ -540,7 +573,9 @@ class _Explicit(Integrator):
         for k in range(1, n + 1):
             t1 = t0 + h if k == n else t0 + k * hs
             s = self._advance(model, s, hs, t1, stats)
-            if not (np.isfinite(s.x).all() and np.isfinite(s.v).all()):
+            w = self._workspace  # the fused update tested the States it vouches for
+            if not (w is not None and s is w.finite_state) and not (
+                    np.isfinite(s.x).all() and np.isfinite(s.v).all()):
                 return None, f"non-finite positions or velocities after sub-step {k} of {n}"
         pe = model.energy(s.x)
         if not math.isfinite(pe):
@@ -587,7 +622,7 @@ class ExplicitEuler(_Explicit):
         a = self._acceleration(model, x, v, free, stats, out=self._work(model).buffer)
         return self._finish(model, x + h * v, v + h * a, t1)
 
-    def step_matrix(self, h, omega, zeta=0.0):
+    def step_matrix(self, h: float, omega: float, zeta: float = 0.0) -> np.ndarray:
         """One-step map of (q, v) on the modal oscillator; of one sub-step with ``substep``."""
         return np.eye(2) + h * self._oscillator(omega, zeta)
 
@@ -622,9 +657,11 @@ class SymplecticEuler(_Explicit):
     _modified_energy = True
 
     def _advance(self, model, state, h, t1, stats):
+        w = self._work(model)
+        if w.free is not None and not w.responds and _update_kernel() is not None:
+            return self._advance_fused(model, state, h, t1, stats, w)
         free = self._free(model, state.t)
         # in the cached buffers: the new State's own copies of x1 and v1 are the step's only arrays
-        w = self._work(model)
         a = self._acceleration(model, state.x, state.v, free, stats, out=w.buffer)
         v1 = np.multiply(a, h, out=w.v_next)
         v1 += state.v  # v + h a, as before
@@ -632,7 +669,28 @@ class SymplecticEuler(_Explicit):
         x1 += state.x  # x + h v1
         return self._finish(model, x1, v1, t1)
 
-    def step_matrix(self, h, omega, zeta=0.0):
+    def _advance_fused(self, model, state, h, t1, stats, w):
+        """:meth:`_advance` in one numba pass after the force (the same bits), into the new State's
+        own arrays (no copies); for models with no driven boundary and no impulse contact."""
+        at, g = self._gradient
+        if at is state.x:  # computed to judge the step that ended at state.x
+            f = g
+        else:
+            f = w.gradient(state.x, w.buffer)
+            stats.gradient_evaluations += 1
+        fd = model.damping_force(state.x, state.v, "lumped")
+        negate = fd is None
+        if not negate:
+            f = np.negative(f, out=w.buffer)
+            f += fd
+        x1, v1 = np.empty(model.ndofs), np.empty(model.ndofs)
+        finite = _update_kernel()(f, negate, w.inv_mass, h, state.x, state.v, w.held, w.x_held,
+                                  w.v_held, x1, v1)
+        out = State._adopt(x1, v1, t1)
+        w.finite_state = out if finite else None
+        return out
+
+    def step_matrix(self, h: float, omega: float, zeta: float = 0.0) -> np.ndarray:
         """One-step map of (q, v) on the modal oscillator; of one sub-step with ``substep``."""
         w2, c = omega * omega, 2.0 * zeta * omega
         # v1 = v + h (-w2 q - c v);  q1 = q + h v1
@@ -662,7 +720,7 @@ class Midpoint(_Explicit):
         am = self._acceleration(model, xm, vm, free_m, stats)
         return self._finish(model, x + h * vm, v + h * am, t1)
 
-    def step_matrix(self, h, omega, zeta=0.0):
+    def step_matrix(self, h: float, omega: float, zeta: float = 0.0) -> np.ndarray:
         """One-step map of (q, v) on the modal oscillator; of one sub-step with ``substep``."""
         hA = h * self._oscillator(omega, zeta)
         return np.eye(2) + hA + hA @ hA / 2.0
@@ -697,7 +755,7 @@ class RK4(_Explicit):
         v = v1 + (h / 6.0) * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
         return self._finish(model, x, v, t1)
 
-    def step_matrix(self, h, omega, zeta=0.0):
+    def step_matrix(self, h: float, omega: float, zeta: float = 0.0) -> np.ndarray:
         """One-step map of (q, v) on the modal oscillator; of one sub-step with ``substep``."""
         hA = h * self._oscillator(omega, zeta)
         hA2 = hA @ hA
