@@ -8,10 +8,14 @@ model with ``contact=fe.IPCContact(...)`` and on the model without it, twice: th
 (the impact: the gap closes from dhat / 2 to the barrier's equilibrium, ~1e-7 m with the
 adaptive kappa, through CCD-bounded Newton steps) and a step in resting contact after a few
 steps. Each row gives Newton iterations and the time in linearization, linear solves and line
-search (CCD included), so the remaining cost can be read off.
+search (CCD included), so the remaining cost can be read off. Times are medians of
+``--repeats`` runs of the step, the with/without-contact pairs interleaved in one process (the
+machine's load then weighs on both alike).
 
     .venv/bin/python scripts/bench_ipc.py            # ~20k tets
     .venv/bin/python scripts/bench_ipc.py --quick    # 96 tets (the test suite's smoke test)
+    .venv/bin/python scripts/bench_ipc.py --projection clamp   # IPC's clamped pair Hessians
+    .venv/bin/python scripts/bench_ipc.py --solver amg         # AMG-CG for both steps
 """
 
 from __future__ import annotations
@@ -33,43 +37,76 @@ def two_cubes(n, size=0.2, gap=5e-4):
 
 
 def model_of(mesh, n_lower, contact):
+    """Neo-Hookean cubes (E = 1 MPa, rho = 1000 kg/m^3) under gravity, the lower one's bottom fixed."""
     fixed = np.zeros(mesh.p.shape[1], dtype=bool)
     fixed[:n_lower] = mesh.p[2, :n_lower] < 1e-12  # the lower cube's bottom face
     return fe.Model(mesh, 1000.0, fe.ElasticBody(fe.NeoHookean(E=1e6, nu=0.3)), fixed=fixed,
                     gravity=(0.0, 0.0, -9.81), contact=contact)
 
 
-def time_step(model, state, dt, repeats):
-    """Best wall time (s) of one implicit Euler step from ``state``, its stats and its end state."""
-    ie = fe.ImplicitEuler(max_iter=200)
-    best, stats, out = np.inf, None, None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = ie.step(model, state, dt)
-        elapsed = time.perf_counter() - t0
-        if elapsed < best:  # the figures of the timed (fastest) repeat
-            best, stats = elapsed, ie.last_stats
-    return best, stats, out
+def time_step(model, state, dt, solver=None):
+    """Wall time (s) of one implicit Euler step from ``state``, its stats and its end state."""
+    ie = fe.ImplicitEuler(max_iter=200, linear_solver=solver)
+    t0 = time.perf_counter()
+    out = ie.step(model, state, dt)
+    return time.perf_counter() - t0, ie.last_stats, out
 
 
 def _breakdown(stats):
     s = stats.seconds
-    return (f"linearize {s.get('linearize', 0.0):.2f} s, solve {s.get('solve', 0.0):.2f} s, "
-            f"line search {s.get('line_search', 0.0):.2f} s")
+    return (f"{stats.newton_iterations} Newton iterations, {stats.linear_solves} linear solves, "
+            f"{stats.linear_setups} factorisations/AMG set-ups; linearize "
+            f"{s.get('linearize', 0.0):.2f} s, solve {s.get('solve', 0.0):.2f} s, line search "
+            f"{s.get('line_search', 0.0):.2f} s")
 
 
-def compare(label, with_ipc, without, state, dt, repeats):
-    """Time the same step from ``state`` with and without contact; print and return the ratio."""
-    time_step(with_ipc, state, dt, 1)  # warm-up (numba compilation, factorisation set-up)
-    time_step(without, state, dt, 1)
-    t_ipc, s_ipc, _ = time_step(with_ipc, state, dt, repeats)
-    t_free, s_free, _ = time_step(without, state, dt, repeats)
-    print(f"{label}: implicit Euler step, dt = {dt} s: with IPC {t_ipc * 1e3:.1f} ms "
-          f"({s_ipc.newton_iterations} Newton iterations; {_breakdown(s_ipc)}), without contact "
-          f"{t_free * 1e3:.1f} ms ({s_free.newton_iterations} Newton iterations; {_breakdown(s_free)})")
-    print(f"{label}: ratio (IPC / no contact): {t_ipc / t_free:.2f}x  (goal <= 1.5x); per Newton "
-          f"iteration {(t_ipc / s_ipc.newton_iterations) / (t_free / s_free.newton_iterations):.2f}x")
-    return t_ipc / t_free
+def compare(label, with_ipc, without, state, dt, repeats, solver=None):
+    """Time the same step from ``state`` with and without contact; print and return the ratio.
+
+    The two steps alternate ``repeats`` times (after one warm-up each: numba compilation);
+    the medians are compared, and the ratio of each pair is printed too."""
+    time_step(with_ipc, state, dt, solver)
+    time_step(without, state, dt, solver)
+    t_ipc, t_free, pairs, its = [], [], [], []
+    for _ in range(repeats):
+        a, s_ipc, _ = time_step(with_ipc, state, dt, solver)
+        b, s_free, _ = time_step(without, state, dt, solver)
+        t_ipc.append(a)
+        t_free.append(b)
+        pairs.append(a / b)
+        # ipctk sums the pair Hessians in parallel, in a varying order: near a saddle the
+        # Newton path, and so its iteration count, can differ between repeats of one step
+        its.append(s_ipc.newton_iterations)
+    m_ipc, m_free = float(np.median(t_ipc)), float(np.median(t_free))
+    print(f"{label}: implicit Euler step, dt = {dt} s, median of {repeats}: with IPC "
+          f"{m_ipc * 1e3:.1f} ms (Newton iterations of the repeats {its}; the last: "
+          f"{_breakdown(s_ipc)}); without contact {m_free * 1e3:.1f} ms "
+          f"({_breakdown(s_free)})")
+    per_it = (m_ipc / float(np.median(its))) / (m_free / s_free.newton_iterations)
+    print(f"{label}: ratio (IPC / no contact): {m_ipc / m_free:.2f}x  (goal <= 1.5x; pairs "
+          f"{min(pairs):.2f}-{max(pairs):.2f}x); per Newton iteration {per_it:.2f}x")
+    return m_ipc / m_free
+
+
+def trace_first_step(model, state, dt, solver=None):
+    """One first-contact step with Newton's debug log and the CCD bound of every Newton step."""
+    import logging
+
+    logging.basicConfig(level=logging.WARNING, format="%(message)s")
+    logging.getLogger("fem_elastic.solvers.newton").setLevel(logging.DEBUG)
+    contact = model.contact
+    bound = contact.max_step
+
+    def max_step(x, dx):
+        a = bound(x, dx)
+        d = contact.diagnostics(x)
+        print(f"  CCD: collision-free fraction {a:.3f} from minimum distance "
+              f"{d['min_distance']:.3e} m ({d['active_contacts']} pairs, kappa {d['kappa']:.4g})")
+        return a
+
+    contact.max_step = max_step
+    t, stats, _ = time_step(model, state, dt, solver)
+    print(f"first contact with IPC: {t:.2f} s, {_breakdown(stats)}")
 
 
 def broad_phase_scaling(sizes, repeats):
@@ -97,31 +134,48 @@ def broad_phase_scaling(sizes, repeats):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="small meshes (seconds)")
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--cells", type=int, default=None,
+                    help="cells along a cube's edge (2 * 6 n^3 tets; default 12, --quick 2)")
+    ap.add_argument("--projection", choices=("clamp", "abs"), default="clamp",
+                    help="PSD projection of the pair Hessians (fe.IPCContact(projection=...))")
+    ap.add_argument("--solver", choices=("auto", "direct", "amg"), default="auto",
+                    help="linear solver of both steps (default fe.AutoSolver: direct below 20k DOFs)")
+    ap.add_argument("--no-broad-phase", action="store_true", help="skip the broad-phase scaling")
+    ap.add_argument("--trace", action="store_true",
+                    help="only the first-contact step, once, logging each Newton iteration "
+                         "(||g||, step fraction, exact or projected) and each CCD bound")
     args = ap.parse_args(argv)
-    n = 2 if args.quick else 12  # 2 * 6 n^3 tets: 96, or 20,736
+    n = args.cells or (2 if args.quick else 12)  # 2 * 6 n^3 tets: 96, or 20,736
+    solver = {"auto": None, "direct": fe.DirectSolver(), "amg": fe.AMGSolver()}[args.solver]
     dt = 0.01
     mesh, n_lower = two_cubes(n)
-    with_ipc = model_of(mesh, n_lower, fe.IPCContact(dhat=1e-3))
+    with_ipc = model_of(mesh, n_lower, fe.IPCContact(dhat=1e-3, projection=args.projection))
     without = model_of(mesh, n_lower, None)
     state = fe.State.rest(with_ipc)
     d = with_ipc.contact.diagnostics(with_ipc.X)
-    print(f"mesh: {mesh.t.shape[1]} tets, {with_ipc.collision_surface().n_vertices} surface vertices, "
-          f"{d['active_contacts']} active contact pairs at the start")
+    if args.trace:
+        trace_first_step(with_ipc, state, dt, solver)
+        return
+    print(f"mesh: {mesh.t.shape[1]} tets, {with_ipc.ndofs} DOFs, "
+          f"{with_ipc.collision_surface().n_vertices} surface vertices, {d['active_contacts']} "
+          f"active contact pairs at the start; projection {args.projection!r}, solver {args.solver!r}")
     # the first step: the upper cube falls from dhat / 2 into the barrier (the impact, the
     # costliest step: CCD-bounded Newton steps while the gap closes by three decades)
-    ratio = compare("first contact", with_ipc, without, state, dt, args.repeats)
+    ratio = compare("first contact", with_ipc, without, state, dt, args.repeats, solver)
     print(f"ratio (IPC / no contact): {ratio:.2f}x  (goal <= 1.5x)")
     # a step in resting contact: after `settle` steps of IPC (the same step timed without contact
     # from the same state, where the elastic problem is the same)
     settle = 2 if args.quick else 5
-    ie = fe.ImplicitEuler(max_iter=200)
+    ie = fe.ImplicitEuler(max_iter=200, linear_solver=solver)
     for _ in range(settle):
         state = ie.step(with_ipc, state, dt)
     d = with_ipc.contact.diagnostics(state.x)
     print(f"after {settle} steps: minimum distance {d['min_distance']:.3g} m, "
           f"{d['active_contacts']} active pairs, kappa {d['kappa']:.4g} N/m^3")
-    compare("resting contact", with_ipc, without, state, dt, args.repeats)
+    compare("resting contact", with_ipc, without, state, dt, args.repeats, solver)
+    if args.no_broad_phase:
+        return
     sizes = (2, 3, 4) if args.quick else (4, 6, 8, 12, 16, 24)
     rows = broad_phase_scaling(sizes, args.repeats)
     for prims, t in rows:

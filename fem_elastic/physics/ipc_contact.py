@@ -53,13 +53,17 @@ from __future__ import annotations
 import logging
 import math
 import warnings
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Literal, cast
 
 import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidMesh, InvalidParameter, MissingDependency
 from .potential import Potential
+
+if TYPE_CHECKING:  # for annotations only (the model imports this module)
+    from .multibody import AnyModel
 
 __all__ = ["IPCContact", "BoundIPCContact"]
 
@@ -69,6 +73,8 @@ _BROAD_PHASES = {
     "bvh": "LBVH", "hash_grid": "HashGrid", "spatial_hash": "SpatialHash",
     "sweep_and_prune": "SweepAndPrune", "brute_force": "BruteForce",
 }
+#: ipctk's PSD projection of a pair's Hessian, by ``IPCContact(projection=...)``
+_PROJECTIONS = {"abs": "ABS", "clamp": "CLAMP"}
 
 
 def _ipctk():
@@ -113,6 +119,21 @@ class IPCContact:
         ipctk's broad phase.
     friction_iterations : int
         Lagged friction solves per implicit step (>= 1).
+    projection : {"clamp", "abs"}
+        How each pair's Hessian is made positive semi-definite when Newton
+        asks for a projected tangent: ``"clamp"`` sets its negative
+        eigenvalues to 0 (IPC's rule), ``"abs"`` flips their sign (Chen et al.
+        2024, "Trust-region eigenvalue filtering for projected Newton"). A
+        clamped pair leaves the directions along which the barrier curves down
+        with only the inertia's ``m / h^2`` (far softer than the barrier near
+        contact), so projected steps along them are long; the absolute value
+        keeps a stiffness there. Neither wins everywhere: on the first step of
+        ``scripts/bench_ipc.py``'s two-cube drop (``--projection``) "abs" took
+        11, 17, 12 and 59 Newton iterations at 2, 3, 4 and 5 cells per edge
+        against 12, 12, 23 and 18 clamped (one process; another gave 56
+        against 20 at 2 cells: ipctk sums the pair Hessians in parallel, and
+        near the scene's saddle the Newton path follows the round-off), so
+        the default stays IPC's.
 
     Examples
     --------
@@ -122,8 +143,14 @@ class IPCContact:
     (0.001, 0.3)
     """
 
-    def __init__(self, dhat, kappa="auto", friction=0.0, epsv=1e-3, self_contact=True,
-                 broad_phase="bvh", friction_iterations=1):
+    kappa: float | Literal["auto"]  # N/m^3, or "auto" (chosen when bound)
+
+    def __init__(self, dhat: float, kappa: float | Literal["auto"] = "auto", friction: float = 0.0,
+                 epsv: float = 1e-3, self_contact: bool = True,
+                 broad_phase: Literal["bvh", "hash_grid", "spatial_hash", "sweep_and_prune",
+                                      "brute_force"] = "bvh",
+                 friction_iterations: int = 1,
+                 projection: Literal["clamp", "abs"] = "clamp") -> None:
         self.dhat = _positive("dhat", dhat, "m; e.g. 1e-3 for a body of about 1 m")
         if isinstance(kappa, str):
             if kappa != "auto":
@@ -148,13 +175,18 @@ class IPCContact:
                 f"friction_iterations must be an integer >= 1, got {friction_iterations!r}."
             )
         self.friction_iterations = friction_iterations
+        if projection not in _PROJECTIONS:
+            raise InvalidParameter(
+                f"projection must be one of {sorted(_PROJECTIONS)}, got {projection!r}."
+            )
+        self.projection = projection
 
     def __repr__(self):
         return (f"IPCContact(dhat={self.dhat!r}, kappa={self.kappa!r}, friction={self.friction!r}, "
                 f"epsv={self.epsv!r}, self_contact={self.self_contact!r}, "
-                f"broad_phase={self.broad_phase!r})")
+                f"broad_phase={self.broad_phase!r}, projection={self.projection!r})")
 
-    def bind(self, model) -> "BoundIPCContact":
+    def bind(self, model: AnyModel) -> "BoundIPCContact":
         """The contact potential on ``model``'s collision surface (see :class:`BoundIPCContact`)."""
         return BoundIPCContact(self, model)
 
@@ -173,7 +205,7 @@ class BoundIPCContact(Potential):
 
     kind = "potential"
 
-    def __init__(self, spec: IPCContact, model):
+    def __init__(self, spec: IPCContact, model: AnyModel) -> None:
         ipctk = _ipctk()
         self.spec = spec
         self.dhat = spec.dhat
@@ -220,7 +252,7 @@ class BoundIPCContact(Potential):
             self.kappa_min, self.kappa_max = float(kappa_min), 100.0 * float(kappa_min)
             self.kappa = self.kappa_min
         else:
-            self.kappa = self.kappa_min = self.kappa_max = spec.kappa
+            self.kappa = self.kappa_min = self.kappa_max = cast(float, spec.kappa)  # not "auto" here
         self._kappa_initialized = not self.adaptive
         self._objective_gradient = None
         self._prev_min_distance = math.inf
@@ -304,12 +336,16 @@ class BoundIPCContact(Potential):
             g += self._friction.gradient(self._tangential, self.mesh, self._U(V))
         return self._scatter(g)
 
-    def hessian(self, x: np.ndarray, project: bool = False):
-        """d2E/dx2 (N/m), CSR ``(ndofs, ndofs)``; per-pair PSD clamping with ``project``."""
+    def hessian(self, x: np.ndarray, project: bool = False) -> sp.csr_matrix:
+        """d2E/dx2 (N/m), CSR ``(ndofs, ndofs)``; with ``project`` each pair's Hessian is
+        made positive semi-definite (``IPCContact(projection=...)``: absolute or clamped
+        eigenvalues)."""
         ipctk = _ipctk()
         V = self._V(x)
         c = self._collisions_at(V)
-        method = ipctk.PSDProjectionMethod.CLAMP if project else ipctk.PSDProjectionMethod.NONE
+        # an IPCContact pickled before ``projection`` existed has IPC's clamp
+        projection = getattr(self.spec, "projection", "clamp")
+        method = getattr(ipctk.PSDProjectionMethod, _PROJECTIONS[projection] if project else "NONE")
         n = 3 * self.surface.n_vertices
         H = sp.csc_matrix((n, n))
         if not c.empty():
@@ -318,7 +354,8 @@ class BoundIPCContact(Potential):
             H = H + self._friction.hessian(self._tangential, self.mesh, self._U(V), method) / self._h
         return self._scatter_matrix(H)
 
-    def linearize(self, x: np.ndarray, project: bool = False):
+    def linearize(self, x: np.ndarray,
+                  project: bool = False) -> tuple[np.ndarray, sp.spmatrix | None]:
         """Gradient and Hessian, PSD-projected per pair with ``project`` (as in IPC's Newton).
 
         The barrier's exact Hessian is indefinite for many pairs (the distance
@@ -378,7 +415,8 @@ class BoundIPCContact(Potential):
             ))
         self._prev_min_distance = dmin
 
-    def begin_solve(self, objective_gradient=None, x=None) -> None:
+    def begin_solve(self, objective_gradient: Callable[[np.ndarray], np.ndarray] | None = None,
+                    x: np.ndarray | None = None) -> None:
         """Start a minimisation (an implicit step, a load step).
 
         With ``kappa="auto"``, kappa is set once, at the first linearization
