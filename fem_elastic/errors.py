@@ -8,6 +8,12 @@ Messages say what was wrong and what to do about it.
 
 from __future__ import annotations
 
+from os import PathLike
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
 __all__ = [
     "FemElasticError",
     "InvalidMesh",
@@ -37,7 +43,7 @@ class InvalidMesh(FemElasticError, ValueError):
         the problem is local to some of them.
     """
 
-    def __init__(self, message: str, elements=None):
+    def __init__(self, message: str, elements: ArrayLike | None = None) -> None:
         super().__init__(message)
         self.elements = elements
 
@@ -70,7 +76,7 @@ class NotConverged(FemElasticError, RuntimeError):
         residual history), so nothing computed is lost.
     """
 
-    def __init__(self, message: str, result=None):
+    def __init__(self, message: str, result: Any = None) -> None:
         super().__init__(message)
         self.result = result
 
@@ -93,8 +99,9 @@ class Diverged(FemElasticError, RuntimeError):
         error comes from a single ``step`` call).
     """
 
-    def __init__(self, message: str, step=None, time=None, reason=None, last_good_state=None,
-                 trajectory=None):
+    def __init__(self, message: str, step: int | None = None, time: float | None = None,
+                 reason: str | None = None, last_good_state: Any = None,
+                 trajectory: Any = None) -> None:
         super().__init__(message)
         self.step = step
         self.time = time
@@ -120,8 +127,9 @@ class StepFailed(Diverged):
         The exception the step raised.
     """
 
-    def __init__(self, message: str, step=None, time=None, reason=None, last_good_state=None,
-                 trajectory=None, original=None):
+    def __init__(self, message: str, step: int | None = None, time: float | None = None,
+                 reason: str | None = None, last_good_state: Any = None,
+                 trajectory: Any = None, original: BaseException | None = None) -> None:
         super().__init__(message, step=step, time=time, reason=reason,
                          last_good_state=last_good_state, trajectory=trajectory)
         self.original = original
@@ -136,7 +144,7 @@ class OutputInUse(InvalidParameter):
         The process id of the holder, as it wrote it in the lock file.
     """
 
-    def __init__(self, message: str, pid=None):
+    def __init__(self, message: str, pid: int | None = None) -> None:
         super().__init__(message)
         self.pid = pid
 
@@ -154,7 +162,7 @@ class WriteFailed(FemElasticError, OSError):
         The file that was being written.
     """
 
-    def __init__(self, message: str, path=None):
+    def __init__(self, message: str, path: str | PathLike[str] | None = None) -> None:
         FemElasticError.__init__(self, message)
         self.path = None if path is None else str(path)
         self.filename = self.path
@@ -174,7 +182,8 @@ class ResourceLimit(InvalidParameter):
         The estimate and what is free (bytes).
     """
 
-    def __init__(self, message: str, needed=None, available=None):
+    def __init__(self, message: str, needed: float | None = None,
+                 available: float | None = None) -> None:
         super().__init__(message)
         self.needed = needed
         self.available = available

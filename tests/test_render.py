@@ -2,6 +2,7 @@
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -256,6 +257,55 @@ def test_a_run_that_stopped_early_holds_its_last_frame(runs, tmp_path):
     body = [_chromatic(iio.imread(p), viewports=2)[:, SIZE[0]:] for p in paths]
     np.testing.assert_array_equal(body[2], body[4])  # held after its last frame
     assert (body[0] != body[2]).any()
+
+
+def test_a_failed_run_says_where_and_why_on_every_frame(tmp_path):
+    """A run that blew up: its frames say "diverged at step N: reason" under the title."""
+    from fem_elastic.app.output import SeriesWriter
+    from fem_elastic.app.render_scene import _run_from_series, failure_line, failure_text, time_stamp
+    from fem_elastic.app.vtu import read_series
+
+    mesh = fe.beam_mesh(length=1.0, width=0.1, height=0.1, cells=(2, 1, 1))
+    model = fe.Model(mesh, density=1000.0, body=fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3)),
+                     fixed="left", gravity=(0.0, 0.0, -9.81))
+    # 20 times the stable step of symplectic Euler: the stiffest mode grows by orders of
+    # magnitude a step, so the blow-up watch stops the run within a few steps
+    dt = 20.0 * fe.critical_time_step(model, fe.SymplecticEuler())
+    run_dir = tmp_path / "blown"
+    writer = SeriesWriter(model, run_dir, info={"variant": "blown"})
+    writer.write_state(fe.State.rest(model))
+    with pytest.raises(fe.Diverged) as err:
+        fe.simulate(model, fe.SymplecticEuler(), dt=dt, steps=40, check_stability=False,
+                    observers=[writer])
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "diverged" and summary["failed_step"] == err.value.step
+    run = _run_from_series(read_series(run_dir), "blown", "displacement")
+    head = f"diverged at step {err.value.step}: "
+    assert run.failure.startswith(head) and len(run.failure) <= len(head) + 60
+    last = len(run.times) - 1
+    for j, t in enumerate(run.times):
+        assert time_stamp(run, j) == f"t = {t:.3f} s" + (" (last good state)" if j == last else "")
+    # wrapped to the panel, two lines at most (the first 100-pixel line holds 20 characters)
+    lines = failure_text(run.failure, width=100.0, font=8).split("\n")
+    assert len(lines) == 2 and lines[0].startswith(head[:16]) and max(map(len, lines)) <= 20
+    # a trajectory saved with .save() records the failure in its message only
+    assert failure_line({"status": "failed", "message": "failed at step 4: the solver\ngave up"}) \
+        == "failed at step 4: the solver gave up"
+    assert failure_line({"status": "completed", "failed_step": 3}) == ""
+
+    # on the picture: the same frame of the run marked completed has its title alone at the
+    # top, so the failed one has more dark (text) pixels there, above the body
+    done = tmp_path / "done"
+    shutil.copytree(run_dir, done)
+    (done / "summary.json").write_text(json.dumps({**summary, "status": "completed"}))
+    dark = []
+    for d in (run_dir, done):
+        png = render.render_frame([d], tmp_path / f"{d.name}.png", frame=0, size=SIZE,
+                                  color_by="displacement", warp=1.0)
+        img = iio.imread(png)[..., :3].astype(int)
+        top = img[: int(0.3 * SIZE[1])]
+        dark.append(int((top.max(axis=2) < 100).sum()))
+    assert dark[0] > dark[1] > 0, dark
 
 
 def test_missing_von_mises_names_the_fields_there_are(tmp_path):

@@ -28,8 +28,9 @@ import logging
 import math
 import numbers
 import time
+import os
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -39,6 +40,14 @@ from ..physics.fields import CellFields
 from ..physics.pyvista_grid import _cells
 from .vtu import REFERENCE_POINTS, write_pvd, write_vtu_frame
 from ..files import write_text_atomic
+
+if TYPE_CHECKING:  # for annotations only
+    from ..dynamics.checkpoint import Checkpoint
+    from ..dynamics.observers import StepEvent
+    from ..dynamics.simulate import Run
+    from ..dynamics.state import State
+    from ..dynamics.trajectory import Trajectory
+    from ..physics.multibody import AnyModel
 
 __all__ = ["SeriesWriter", "write_summary", "to_json"]
 
@@ -133,7 +142,7 @@ def to_json(value):
     )
 
 
-def write_summary(path, summary: dict) -> Path:
+def write_summary(path: str | os.PathLike[str], summary: dict[str, Any]) -> Path:
     """Write a run's figures as strict JSON (non-finite numbers as null), atomically.
 
     Parameters
@@ -267,9 +276,12 @@ class SeriesWriter(Observer):
     (array([0.  , 0.02, 0.04, 0.05]), 'completed', 4)
     """
 
-    def __init__(self, model, run_dir, *, every: int = 1, n_steps: int | None = None,
-                 info: dict | None = None, compression: str | None = "zlib", resume_from=None,
-                 time_unit: str = "s"):
+    _last_state: State | None  # the last state seen (written or not)
+
+    def __init__(self, model: AnyModel, run_dir: str | os.PathLike[str], *, every: int = 1,
+                 n_steps: int | None = None, info: dict[str, Any] | None = None,
+                 compression: Literal["zlib", "lzma"] | None = "zlib",
+                 resume_from: Checkpoint | None = None, time_unit: str = "s") -> None:
         if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
             raise InvalidParameter(
                 f"every must be an integer >= 1 (steps per frame), got {every!r}."
@@ -357,7 +369,7 @@ class SeriesWriter(Observer):
         return self._last_step + 1
 
     # frames ---------------------------------------------------------------------------
-    def write_state(self, state) -> Path:
+    def write_state(self, state: State) -> Path:
         """Write ``state`` as the next frame and rewrite the PVD.
 
         Parameters
@@ -392,17 +404,17 @@ class SeriesWriter(Observer):
         self.seconds_output += time.perf_counter() - t0
         return path
 
-    def on_step(self, run, event) -> None:
+    def on_step(self, run: Run, event: StepEvent) -> None:
         """:class:`fem_elastic.dynamics.Observer` hook: :meth:`callback` with the step taken."""
         self.callback(event.k, event.after)
 
-    def on_failure(self, run, error) -> None:
+    def on_failure(self, run: Run, error: Diverged) -> None:
         """:class:`fem_elastic.dynamics.Observer` hook: finish the series of a run that
         diverged or failed (:meth:`finish_failed`)."""
         if not self.finished:
             self.finish_failed(error)
 
-    def finish_failed(self, error) -> Path:
+    def finish_failed(self, error: Diverged) -> Path:
         """Finish the series of a run that ``error`` (a :class:`fe.Diverged`) ended.
 
         The last good state (``error.last_good_state``) is the last frame, and
@@ -421,7 +433,7 @@ class SeriesWriter(Observer):
         return self.finish(getattr(error, "trajectory", None), status=status, message=str(error),
                            extra=extra, final_state=getattr(error, "last_good_state", None))
 
-    def callback(self, k: int, state) -> None:
+    def callback(self, k: int, state: State) -> None:
         """``fe.simulate`` callback: write a frame after every ``every``-th step (and the last).
 
         Parameters
@@ -437,8 +449,10 @@ class SeriesWriter(Observer):
             self.write_state(state)
 
     # the end ----------------------------------------------------------------------------
-    def finish(self, trajectory=None, status: str = "completed", message: str = "",
-               extra: dict | None = None, *, final_state=None) -> Path:
+    def finish(self, trajectory: Trajectory | None = None,
+               status: str = "completed",
+               message: str = "", extra: dict[str, Any] | None = None, *,
+               final_state: State | None = None) -> Path:
         """Write the final frame if it is not written yet, then ``summary.json``.
 
         Parameters

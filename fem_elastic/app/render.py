@@ -6,7 +6,9 @@ the deformed surface coloured by von Mises stress (Pa) or displacement
 magnitude (m) over the grey outline of the undeformed body, the displacement
 magnified when it is too small to see (``warp``, stated on the picture), a
 colour bar with its unit in a band below the scene, the ground plane (whole)
-when the run had one, the scene's name and a time label, as PNG frames, a GIF or an MP4 (H.264). Several runs
+when the run had one, the scene's name and a time label (a run that blew up or failed says
+"diverged at step N: reason" under its title on every frame, from its ``summary.json``),
+as PNG frames, a GIF or an MP4 (H.264). Several runs
 of the same scene (FEM beside its mass-spring copy, say) are drawn side by
 side, one viewport each, with one colour range and one camera for all.
 
@@ -53,12 +55,17 @@ import time
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import Literal, Union
 
 import numpy as np
 
 from ..errors import InvalidParameter, MissingDependency
 from ..files import _atomic_write, write_failed
 from .render_scene import FIELDS, _Run, _run_from_series, _Scene, color_range
+from .vtu import SeriesData
+
+#: One run to draw: its directory (``series.pvd``, ``frames/``, ``summary.json``) or its series.
+RunSource = Union[str, os.PathLike, SeriesData]
 
 __all__ = ["render_runs", "render_frame", "color_range", "MissingDependency", "FORMATS", "FIELDS"]
 
@@ -218,9 +225,11 @@ def _progress(total: int, enabled: bool, desc: str):
     return tqdm(total=total, desc=desc, unit="frame")
 
 
-def render_runs(run_dirs, out, *, format: str = "mp4", size=(960, 540),
-                color_by: str = "von_mises", fps: float = 30, titles=None, every: int = 1,
-                progress: bool = False, warp="auto") -> list[Path]:
+def render_runs(run_dirs: RunSource | Sequence[RunSource], out: str | os.PathLike[str], *,
+                format: Literal["mp4", "gif", "png"] = "mp4", size: tuple[int, int] = (960, 540),
+                color_by: Literal["von_mises", "displacement", "body"] = "von_mises",
+                fps: float = 30, titles: Sequence[str] | None = None, every: int = 1,
+                progress: bool = False, warp: Literal["auto"] | float = "auto") -> list[Path]:
     """Draw one run, or several side by side, as an MP4, a GIF or PNG frames.
 
     Parameters
@@ -376,8 +385,11 @@ def _render_mp4(scene: _Scene, out: Path, fps: float, bar) -> Path:
     return _atomic_write(out, write)
 
 
-def render_frame(run_dirs, path, *, frame=-1, size=(960, 540), color_by: str = "von_mises",
-                 titles=None, warp="auto") -> Path:
+def render_frame(run_dirs: RunSource | Sequence[RunSource], path: str | os.PathLike[str], *,
+                 frame: int | Sequence[int] = -1, size: tuple[int, int] = (960, 540),
+                 color_by: Literal["von_mises", "displacement", "body"] = "von_mises",
+                 titles: Sequence[str] | None = None,
+                 warp: Literal["auto"] | float = "auto") -> Path:
     """Draw frames of one run, or of several side by side, as one PNG.
 
     The colour range and the camera are those of the whole run (as in

@@ -26,6 +26,8 @@ value the user sets there is respected, and the logger then left alone.
 
 from __future__ import annotations
 
+import re
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -71,8 +73,9 @@ class _Run:
     association: str  # "cell" or "point"
     shown: np.ndarray  # indices into values[t] of the entities seen (range statistics)
     ground_z: float | None  # m, height of the ground plane or None
-    status: str  # "completed", "interrupted", "diverged" or "" when unknown
+    status: str  # "completed", "interrupted", "diverged", "failed" or "" when unknown
     scene: str = ""  # the scene's name (summary "scene"), the picture's title
+    failure: str = ""  # a run that blew up or failed: "diverged at step 13: <reason>", else ""
 
     def points(self, k: int) -> np.ndarray:
         """Deformed positions (m), ``(n, 3)``, of frame ``k``."""
@@ -126,7 +129,37 @@ def _run_from_series(series, title: str, color_by: str) -> _Run:
         title=title, times=times, points_ref=points_ref, displacement=displacement, faces=faces,
         values=values, association=association, shown=shown, ground_z=ground_z,
         status=str(summary.get("status", "")), scene=str(summary.get("scene") or ""),
+        failure=failure_line(summary),
     )
+
+
+#: A failure's reason is cut to this many characters on the pictures (summary.json has it whole).
+REASON_CHARS = 60
+
+
+def failure_line(summary: dict) -> str:
+    """What a failed run's frames say, e.g. ``"diverged at step 13: energy grew ..."``; "" if none.
+
+    For ``summary["status"]`` ``"diverged"`` or ``"failed"`` (``fe.Diverged``,
+    ``fe.StepFailed``): the step and reason the command records (``failed_step``,
+    ``reason``), else those of the trajectory's message (``"diverged at step 13:
+    ..."``, what ``Trajectory.save`` writes), else the status alone. The reason is
+    cut to :data:`REASON_CHARS` characters.
+    """
+    status = summary.get("status")
+    if status not in ("diverged", "failed"):
+        return ""
+    step, reason = summary.get("failed_step"), summary.get("reason")
+    if step is None:
+        found = re.match(r"(?:diverged|failed) at step (\d+): (.*)", str(summary.get("message") or ""),
+                         re.S)
+        if found:
+            step, reason = int(found.group(1)), found.group(2)
+    line = status if step is None else f"{status} at step {step}"
+    reason = " ".join(str(reason or "").split())  # one line
+    if len(reason) > REASON_CHARS:
+        reason = reason[:REASON_CHARS - 3].rstrip() + "..."
+    return f"{line}: {reason}" if reason else line
 
 
 def color_range(values, percentile: float = COLOR_PERCENTILE) -> tuple[float, float]:
@@ -342,6 +375,10 @@ class _Scene:
                     self._text(p, "\n".join(head), (0.02, 0.98), font, "left", "top")
                 self._text(p, run.title, (0.5, 0.98 - (len(head) + 0.2) * 1.25 * font / row_height),
                            font, "center", "top")
+                if run.failure:  # on every frame, under the title: the run did not finish
+                    self._text(p, failure_text(run.failure, size[0] / cols, font),
+                               (0.5, 0.98 - (len(head) + 1.2) * 1.25 * font / row_height),
+                               font, "center", "top")
                 stamp = self._text(p, " ", (0.02, 0.03), font, "left", "bottom")
                 if r == rows - 1 and c == cols - 1 and color_by != "body":
                     # in the band under the scene (the camera leaves it free), right of the clock
@@ -405,16 +442,41 @@ class _Scene:
             arr = data.GetArray(self.color_by)
             np.copyto(_numpy_view(arr), run.values[j])
             arr.Modified()
-            text = f"t = {run.times[j]:.3f} s"
-            if j == len(run.times) - 1 and run.status in ("diverged", "interrupted"):
-                text += f" ({run.status})"
-            stamp.SetInput(text)
+            stamp.SetInput(time_stamp(run, j))
         # screenshot() reads the window without drawing again (after the first frame)
         self.plotter.render()
         return self.plotter.screenshot(return_img=True)
 
     def close(self):
         self.plotter.close()
+
+
+def failure_text(failure: str, width: float, font: int) -> str:
+    """``failure`` (see :func:`failure_line`) wrapped to a viewport ``width`` pixels wide, 2 lines at most.
+
+    A character of the default font is about 0.6 of the font's height (``font``, pixels) wide.
+    """
+    lines = textwrap.wrap(failure, max(16, int(width / (0.6 * font))))
+    if len(lines) > 2:
+        lines = lines[:2]
+        lines[1] = lines[1][: max(len(lines[1]) - 3, 1)].rstrip() + "..."
+    return "\n".join(lines)
+
+
+def time_stamp(run: _Run, j: int) -> str:
+    """The clock of frame ``j`` of ``run``: ``"t = 0.120 s"``.
+
+    Every frame of a run that blew up or failed also shows the failure under its
+    title (:func:`failure_text`); its last frame, the last good state, says so here.
+    The last frame of an interrupted run says that.
+    """
+    text = f"t = {run.times[j]:.3f} s"
+    if j == len(run.times) - 1:
+        if run.failure:
+            text += " (last good state)"
+        elif run.status == "interrupted":
+            text += " (interrupted)"
+    return text
 
 
 def _numpy_view(vtk_array) -> np.ndarray:

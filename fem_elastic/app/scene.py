@@ -25,9 +25,12 @@ defaults) lives in :mod:`fem_elastic.app.scene_schema`; :func:`scene_help` print
 from __future__ import annotations
 
 import math
+import os
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 try:
     import tomllib
@@ -35,6 +38,18 @@ except ModuleNotFoundError:  # pragma: no cover - Python < 3.11
     import tomli as tomllib  # type: ignore[no-redef]  # the same API on Python 3.10
 
 from ..errors import FemElasticError, InvalidParameter
+
+if TYPE_CHECKING:  # for annotations only
+    from typing import Unpack  # Python >= 3.11
+
+    from skfem import MeshTet
+
+    from ..dynamics.integrators.base import Integrator
+    from ..dynamics.simulate import SimulateOptions
+    from ..dynamics.state import State
+    from ..physics.multibody import AnyModel
+    from ..dynamics.trajectory import Trajectory
+    from ..solvers.static import SolveOptions, StaticResult
 from ..materials.base import elastic_constants
 from ..resources import check_input_file
 from .toml_lines import KeyLines as _KeyLines
@@ -80,7 +95,7 @@ class SceneError(InvalidParameter):
     """
 
     def __init__(self, message: str, *, key: str | None = None, line: int | None = None,
-                 file: str | None = None, suggestion: str | None = None):
+                 file: str | None = None, suggestion: str | None = None) -> None:
         self.message = message
         self.key = key
         self.line = line
@@ -111,7 +126,8 @@ def _syntax_error(exc: Exception, text: str, source: str) -> SceneError:
     )
 
 
-def parse_scene(text: str, *, source: str = "<string>", base_dir=".") -> "Scene":
+def parse_scene(text: str, *, source: str = "<string>",
+                base_dir: str | os.PathLike[str] = ".") -> "Scene":
     """Check a scene given as TOML text and return it as a :class:`Scene`.
 
     Parameters
@@ -201,7 +217,7 @@ def parse_scene(text: str, *, source: str = "<string>", base_dir=".") -> "Scene"
 MAX_SCENE_BYTES = 4 * 2**20
 
 
-def load_scene(path) -> "Scene":
+def load_scene(path: str | os.PathLike[str]) -> "Scene":
     """Read and check a scene file (see :func:`parse_scene`).
 
     Parameters
@@ -302,11 +318,11 @@ class BuiltRun:
     """
 
     name: str
-    model: object
-    integrator: object
+    model: AnyModel
+    integrator: Integrator | None
     dt: float
     steps: int
-    state: object
+    state: State | None
     record_every: int
     output: dict
     info: dict
@@ -317,7 +333,7 @@ class BuiltRun:
         """``"static"`` for a scene with ``[solve] kind = "static"``, else ``"dynamic"``."""
         return "dynamic" if self.static is None else "static"
 
-    def solve(self, **options):
+    def solve(self, **options: Unpack[SolveOptions]) -> StaticResult:
         """Solve a static scene's run through :func:`fem_elastic.solve_static`.
 
         Parameters
@@ -340,7 +356,7 @@ class BuiltRun:
         settings.update(options)
         return solve_static(self.model, **settings)
 
-    def simulate(self, **options):
+    def simulate(self, **options: Unpack[SimulateOptions]) -> Trajectory:
         """Run it through :func:`fem_elastic.dynamics.simulate`.
 
         Parameters
@@ -361,11 +377,13 @@ class BuiltRun:
             raise InvalidParameter(
                 f'run "{self.name}" is static ([solve] kind = "static"): use .solve() for its load path.'
             )
-        settings = {"steps": self.steps, "state": self.state, "record_every": self.record_every}
+        settings: SimulateOptions = {"steps": self.steps, "state": self.state,
+                                     "record_every": self.record_every}
         if "t_end" in options:  # an end time replaces the scene's step count
             settings.pop("steps")
         settings.update(options)
-        return simulate(self.model, self.integrator, self.dt, **settings)
+        # a dynamic run always has its integrator (None only for a static one, refused above)
+        return simulate(self.model, cast("Integrator", self.integrator), self.dt, **settings)
 
 
 @dataclass(frozen=True)
@@ -413,7 +431,7 @@ class Scene:
             raise self._error(path, str(exc)) from None
 
     # building --------------------------------------------------------------------
-    def build(self, variants=None) -> list[BuiltRun]:
+    def build(self, variants: Sequence[str] | None = None) -> list[BuiltRun]:
         """Build the runs: one :class:`BuiltRun` per variant.
 
         Parameters
@@ -455,7 +473,7 @@ class Scene:
         """Whether the scene asks for a static solve (``[solve] kind = "static"``)."""
         return (self.spec.get("solve") or {}).get("kind") == "static"
 
-    def mesh(self):
+    def mesh(self) -> MeshTet:
         """The scene's mesh (points in m), checked against the boundaries the scene names.
 
         What :meth:`build` gives every run, without building a model.

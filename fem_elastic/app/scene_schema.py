@@ -45,6 +45,7 @@ from ..dynamics.projective import ProjectiveDynamics
 from ..dynamics.shape_matching import MODES as SHAPE_MATCHING_MODES
 from ..dynamics.shape_matching import ShapeMatching
 from ..solvers.linear_solvers import AMGSolver, AutoSolver, DirectSolver
+from ..solvers.cholmod import CholmodSolver  # scikit-sparse imported only when one is made
 from ..materials import Corotated, LinearElastic, NeoHookean, StableNeoHookean, StVK
 from ..physics.springs import lloyd_stiffness, van_gelder_stiffness
 from .schema_types import (
@@ -106,7 +107,7 @@ INTEGRATORS = {
 }
 CALIBRATIONS = {"van_gelder": van_gelder_stiffness, "lloyd": lloyd_stiffness}
 #: ``linear_solver = "..."`` in [integrator]: the solver objects it stands for
-LINEAR_SOLVERS = {"auto": AutoSolver, "direct": DirectSolver, "amg": AMGSolver}
+LINEAR_SOLVERS = {"auto": AutoSolver, "direct": DirectSolver, "amg": AMGSolver, "cholmod": CholmodSolver}
 MOTIONS = ("twist", "translate")
 RENDER_FORMATS = ("mp4", "gif", "png")
 CONTACT_TYPES = ("ipc", "impulse")  # the [contact] table's types (physics.ipc_contact, physics.impulse_contact)

@@ -12,11 +12,14 @@ import json
 import logging
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
+import os
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import InvalidParameter
 from ..files import _atomic_write, write_text_atomic
@@ -32,8 +35,12 @@ logger = logging.getLogger(__name__)
 REFERENCE_POINTS = "m, reference position"
 
 
-def write_vtu_frame(path, points, tets, point_data=None, cell_data=None, *,
-                    compression: str | None = "zlib", field_data=None, units=None) -> Path:
+def write_vtu_frame(path: str | os.PathLike[str], points: ArrayLike, tets: ArrayLike,
+                    point_data: Mapping[str, ArrayLike] | None = None,
+                    cell_data: Mapping[str, ArrayLike] | None = None, *,
+                    compression: Literal["zlib", "lzma"] | None = "zlib",
+                    field_data: Mapping[str, ArrayLike] | None = None,
+                    units: Mapping[str, str] | None = None) -> Path:
     """Write one frame of a series: a tet grid with point, cell and field data, as XML VTU.
 
     Written with meshio's VTU writer (VTK XML ``UnstructuredGrid``, binary,
@@ -188,7 +195,7 @@ def vtu_units(field_data: dict) -> dict:
     return dict(line.split("=", 1) for line in text.splitlines() if "=" in line)
 
 
-def write_pvd(path, entries) -> Path:
+def write_pvd(path: str | os.PathLike[str], entries: Iterable[tuple[float, str]]) -> Path:
     """Write a ParaView collection (``.pvd``) listing the frames of a series with their times.
 
     Parameters
@@ -334,7 +341,7 @@ def _read_frame(path: Path):
     return points, tets, pdata, cells
 
 
-def read_series(run_dir) -> SeriesData:
+def read_series(run_dir: str | os.PathLike[str]) -> SeriesData:
     """Read a run directory's VTU series (``series.pvd``, ``frames/``, ``summary.json``).
 
     Only frames that the PVD lists, that exist and that read back complete

@@ -303,7 +303,7 @@ def trajectory_from_records(frames, **fields) -> Trajectory:
     )
 
 
-def load_checkpoint(directory) -> Checkpoint:
+def load_checkpoint(directory: str | os.PathLike[str]) -> Checkpoint:
     """Read the last checkpoint in ``directory``.
 
     Parameters

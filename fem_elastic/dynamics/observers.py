@@ -98,13 +98,17 @@ import logging
 import math
 import warnings
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..physics.inversion import DetF
 from .checkpoint import _Snapshot, frame_record
 from .state import State
+
+if TYPE_CHECKING:  # for annotations only (simulate imports this module)
+    from ..errors import Diverged
+    from .simulate import Run
 
 __all__ = ["Observer", "StepEvent", "BlowUpWatch", "InversionWatch", "InversionWarning", "Recorder",
            "Callback", "CheckpointWriter", "ProgressBar"]
@@ -123,19 +127,19 @@ class Observer:
     which builds the :class:`fe.Diverged` to raise.
     """
 
-    def on_start(self, run) -> None:
+    def on_start(self, run: Run) -> None:
         """Before the first step of this call (``run.steps_done`` > 0 after a resume)."""
 
-    def on_step(self, run, event: StepEvent) -> None:
+    def on_step(self, run: Run, event: StepEvent) -> None:
         """After step ``event.k`` was accepted; ``event.after`` is the new state."""
 
-    def on_finish(self, run) -> None:
+    def on_finish(self, run: Run) -> None:
         """After the last step."""
 
-    def on_interrupt(self, run) -> None:
+    def on_interrupt(self, run: Run) -> None:
         """On Ctrl-C, after the last step completed (``run.state``)."""
 
-    def on_failure(self, run, error) -> None:
+    def on_failure(self, run: Run, error: Diverged) -> None:
         """When ``error`` (a :class:`fe.Diverged` or :class:`fe.StepFailed`) ends the run.
 
         ``run.state`` is the last good state; ``error.trajectory`` the frames so
@@ -143,7 +147,7 @@ class Observer:
         raised here is logged, never raised in its place).
         """
 
-    def on_close(self, run) -> None:
+    def on_close(self, run: Run) -> None:
         """Always, last: release what the observer holds (a progress bar, a file)."""
 
 

@@ -78,15 +78,20 @@ from __future__ import annotations
 import math
 import numbers
 import weakref
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import scipy.sparse as sp
+from numpy.typing import ArrayLike
 
 from ..errors import Diverged, InvalidParameter
 from ..materials.svd import polar_rotation
 from .integrators.base import Integrator, StepStats, check_dt, check_state
 from .position_based.base import check_one_body
 from .state import State
+
+if TYPE_CHECKING:  # for annotations only
+    from ..physics.multibody import AnyModel
 
 __all__ = ["HELD_WEIGHT", "MODES", "ShapeMatcher", "ShapeMatching"]
 
@@ -220,7 +225,9 @@ class ShapeMatcher:
     True
     """
 
-    def __init__(self, rest, masses, mode="linear", beta=0.5, clusters=1, overlap=1.0, held=None):
+    def __init__(self, rest: ArrayLike, masses: ArrayLike,
+                 mode: Literal["rigid", "linear", "quadratic"] = "linear", beta: float = 0.5,
+                 clusters: int = 1, overlap: float = 1.0, held: ArrayLike | None = None) -> None:
         rest = np.array(rest, dtype=float)
         masses = np.array(masses, dtype=float)
         if rest.ndim != 2 or rest.shape[1] != 3 or rest.shape[0] < 4 or not np.isfinite(rest).all():
@@ -311,7 +318,7 @@ class ShapeMatcher:
     def _centres(self, x):
         return (self._S @ (self._mt[:, None] * x[self._node])) / self._M[:, None]
 
-    def goals(self, x) -> np.ndarray:
+    def goals(self, x: ArrayLike) -> np.ndarray:
         """Goal positions ``(n, 3)`` (m) of the points at positions ``x`` (n, 3).
 
         Examples
@@ -349,7 +356,7 @@ class ShapeMatcher:
         g = np.einsum("kij,kj->ki", T[cluster], self._qt) + cm[cluster]
         return self._avg @ g
 
-    def rigid_velocity_damping(self, x, v, k: float) -> np.ndarray:
+    def rigid_velocity_damping(self, x: np.ndarray, v: np.ndarray, k: float) -> np.ndarray:
         """The velocity change ``k (v_cm + omega x r - v)`` averaged over each point's clusters.
 
         Examples
@@ -375,7 +382,8 @@ class ShapeMatcher:
         rigid = vcm[cluster] + np.cross(omega[cluster], r)
         return k * (self._avg @ (rigid - v[node]))
 
-    def step(self, x, v, dt, alpha=1.0, damping=0.0, force=None):
+    def step(self, x: ArrayLike, v: ArrayLike, dt: float, alpha: float = 1.0, damping: float = 0.0,
+             force: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
         """One step of shape matching on arrays: ``(x1, v1)``, each (n, 3).
 
         ``v += damping-change; v += alpha (g - x) / dt + dt force / m; x += dt v``.
@@ -440,8 +448,9 @@ class ShapeMatching(Integrator):
     order = 1
     mass = "lumped"
 
-    def __init__(self, mode: str = "linear", beta: float = 0.5, alpha: float = 0.5,
-                 damping: float = 0.0, clusters: int = 1, overlap: float = 1.0):
+    def __init__(self, mode: Literal["rigid", "linear", "quadratic"] = "linear", beta: float = 0.5,
+                 alpha: float = 0.5, damping: float = 0.0, clusters: int = 1,
+                 overlap: float = 1.0) -> None:
         super().__init__()
         self.mode, self.beta, self.clusters, self.overlap = _check_settings(mode, beta, clusters, overlap)
         self.alpha = _check_unit("alpha", alpha)
@@ -453,7 +462,7 @@ class ShapeMatching(Integrator):
         return (f"fe.ShapeMatching(mode={self.mode!r}, beta={self.beta:g}, alpha={self.alpha:g}, "
                 f"damping={self.damping:g}, clusters={self.clusters}, overlap={self.overlap:g})")
 
-    def matcher(self, model, t: float = 0.0) -> ShapeMatcher:
+    def matcher(self, model: AnyModel, t: float = 0.0) -> ShapeMatcher:
         """The :class:`ShapeMatcher` of ``model``'s nodes, with the nodes held at time ``t`` (s).
 
         Built on first use and kept (one per set of held nodes: a driven
@@ -474,7 +483,7 @@ class ShapeMatching(Integrator):
             self._matchers[key] = matcher
         return matcher
 
-    def step(self, model, state: State, dt: float) -> State:
+    def step(self, model: AnyModel, state: State, dt: float) -> State:
         h = check_dt(dt)
         check_state(model, state)
         check_one_body(model, "ShapeMatching")

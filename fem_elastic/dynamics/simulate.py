@@ -27,7 +27,10 @@ import math
 import numbers
 import time
 import warnings
+import os
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
@@ -40,6 +43,11 @@ from .observers import (BlowUpWatch, Callback, CheckpointWriter, InversionWatch,
 from .state import State
 from .trajectory import COUNT_FIELDS, STEP_FIELDS, Trajectory
 
+if TYPE_CHECKING:  # for annotations only
+    from ..physics.multibody import AnyModel
+    from .integrators.base import Integrator
+    from .observers import Observer
+
 __all__ = ["simulate", "StabilityWarning", "Run", "MAX_STEPS"]
 
 log = logging.getLogger(__name__)
@@ -49,9 +57,26 @@ class StabilityWarning(UserWarning):
     """An explicit time step above the scheme's stability limit."""
 
 
+class SimulateOptions(TypedDict, total=False):
+    """The keywords of :func:`simulate` (for ``BuiltRun.simulate(**options)``)."""
+
+    t_end: float | None
+    steps: int | None
+    state: State | None
+    record_every: int
+    progress: bool
+    check_stability: bool
+    energy_growth: float
+    callback: Callable[[int, State], object] | None
+    checkpoint_dir: str | os.PathLike[str] | None
+    checkpoint_every: int
+    resume: bool | Checkpoint
+    observers: Sequence[Observer]
+
+
 def simulate(
-    model,
-    integrator,
+    model: AnyModel,
+    integrator: Integrator,
     dt: float,
     *,
     t_end: float | None = None,
@@ -61,11 +86,11 @@ def simulate(
     progress: bool = False,
     check_stability: bool = True,
     energy_growth: float = 1.0,
-    callback=None,
-    checkpoint_dir=None,
+    callback: Callable[[int, State], object] | None = None,
+    checkpoint_dir: str | os.PathLike[str] | None = None,
     checkpoint_every: int = 0,
-    resume=False,
-    observers=(),
+    resume: bool | Checkpoint = False,
+    observers: Sequence[Observer] = (),
 ) -> Trajectory:
     """Integrate ``model`` in time.
 

@@ -8,12 +8,23 @@ det F of the body after it (``min_det_F``: <= 0 means an inverted element).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
 from ..errors import InvalidParameter
 from ..physics import result_view as _view
+
+if TYPE_CHECKING:  # for annotations only (pyvista and matplotlib are optional)
+    from typing import Unpack  # Python >= 3.11
+
+    import pyvista
+    from matplotlib.axes import Axes
+
+    from ..physics.multibody import AnyModel
+    from ..physics.pyvista_grid import FrameOptions
 
 __all__ = ["Trajectory", "STEP_FIELDS", "COUNT_FIELDS"]
 
@@ -192,7 +203,8 @@ class Trajectory:
             )
         return int(frame) % n
 
-    def to_pyvista(self, frame: int = -1, *, model=None):
+    def to_pyvista(self, frame: int = -1, *,
+                   model: AnyModel | None = None) -> pyvista.UnstructuredGrid:
         """Frame ``frame`` as a pyvista ``UnstructuredGrid`` on the reference points.
 
         Point data ``displacement`` (m) and ``velocity`` (m/s), cell data
@@ -236,8 +248,9 @@ class Trajectory:
         return (np.asarray(model.X) + nodal_positions(model, self.displacement[k]),
                 nodal_positions(model, self.velocity[k]))
 
-    def plot(self, frame: int = -1, *, scalars: str = "von_mises", magnification="auto",
-             model=None, **kwargs):
+    def plot(self, frame: int = -1, *, scalars: str = "von_mises",
+             magnification: Literal["auto"] | float = "auto", model: AnyModel | None = None,
+             **kwargs: Unpack[FrameOptions]) -> pyvista.Plotter:
         """Draw frame ``frame`` with pyvista: the deformed body over its undeformed outline.
 
         ``magnification="auto"`` magnifies a deflection under 5 % of the body's
@@ -255,7 +268,7 @@ class Trajectory:
         kwargs.setdefault("title", f"{self.integrator}: t = {float(self.times[frame]):.4g} s")
         return plot_grid(grid, scalars=scalars, magnification=magnification, **kwargs)
 
-    def plot_energy(self, ax=None):
+    def plot_energy(self, ax: Axes | None = None) -> Axes:
         """Kinetic, potential and total energy (J) against time (s), with matplotlib.
 
         Returns
@@ -272,7 +285,7 @@ class Trajectory:
     FRAME_QUANTITIES = {"kinetic": "J", "potential": "J", "total": "J", "max_displacement": "m",
                         "max_speed": "m/s"}
 
-    def plot_history(self, quantity: str, ax=None):
+    def plot_history(self, quantity: str, ax: Axes | None = None) -> Axes:
         """One quantity against time (per frame) or step (per-step statistics), with matplotlib.
 
         Parameters
@@ -308,7 +321,8 @@ class Trajectory:
             f"or a per-step statistic {sorted(self.step_stats)}."
         )
 
-    def save(self, run_dir, *, model=None, overwrite: bool = False):
+    def save(self, run_dir: str | os.PathLike[str], *, model: AnyModel | None = None,
+             overwrite: bool = False) -> Path:
         """Write the trajectory as a run directory, the format ``fem-elastic run`` writes.
 
         ``series.pvd``, ``frames/frame_%06d.vtu`` (reference points,

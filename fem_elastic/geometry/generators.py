@@ -24,7 +24,7 @@ __all__ = ["cook_membrane_mesh", "COOK_CORNERS"]
 COOK_CORNERS = ((0.0, 0.0), (48.0, 44.0), (48.0, 60.0), (0.0, 44.0))
 
 
-def cook_membrane_mesh(cells=(8, 8), thickness: float = 1.0, layers: int = 1,
+def cook_membrane_mesh(cells: tuple[int, int] = (8, 8), thickness: float = 1.0, layers: int = 1,
                        scale: float = 1.0) -> MeshTet:
     """Tet mesh of Cook's membrane: the tapered panel (0, 0), (48, 44), (48, 60), (0, 44), as a slab.
 

@@ -26,6 +26,7 @@ import numbers
 from collections.abc import Mapping
 
 import numpy as np
+from numpy.typing import ArrayLike
 from skfem import MeshTet, MeshTet2
 
 from ..errors import InvalidMesh, InvalidParameter
@@ -413,7 +414,7 @@ def signed_volumes(mesh: MeshTet) -> np.ndarray:
     return _signed_volumes(np.asarray(mesh.p, dtype=np.float64).T, np.asarray(mesh.t).T)
 
 
-def validate_mesh(mesh, *, degenerate_tol: float = DEGENERATE_TOL):
+def validate_mesh(mesh: MeshTet, *, degenerate_tol: float = DEGENERATE_TOL) -> MeshTet:
     """Check that ``mesh`` is a usable linear tet mesh; return it unchanged.
 
     Checks, in order: it is a linear :class:`skfem.MeshTet`; points are finite
@@ -483,9 +484,9 @@ def validate_mesh(mesh, *, degenerate_tol: float = DEGENERATE_TOL):
 
 
 def mesh_from_arrays(
-    points,
-    tets,
-    boundaries: Mapping | None = None,
+    points: ArrayLike,
+    tets: ArrayLike,
+    boundaries: Mapping[str, ArrayLike] | None = None,
     *,
     reorient: bool = False,
     validate: bool = True,

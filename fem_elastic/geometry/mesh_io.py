@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import errno
 import logging
+import os
 from pathlib import Path
 
 import numpy as np
@@ -106,7 +107,8 @@ def _triples_from_triangles(mio) -> dict[str, list[np.ndarray]]:
     return found
 
 
-def load_mesh(path, *, reorient: bool = False, validate: bool = True) -> MeshTet:
+def load_mesh(path: str | os.PathLike[str], *, reorient: bool = False,
+              validate: bool = True) -> MeshTet:
     """Read a tetrahedral mesh from any file format meshio reads.
 
     The "tetra" cells form the mesh. Quadratic "tetra10" cells are reduced to
@@ -283,7 +285,7 @@ def _meshio_read(meshio, path: Path, file_format):
     raise meshio.ReadError(_READ_FAILURES[path])
 
 
-def save_mesh(mesh: MeshTet, path) -> Path:
+def save_mesh(mesh: MeshTet, path: str | os.PathLike[str]) -> Path:
     """Write a tet mesh, with its named boundaries, atomically.
 
     The file is written to a temporary file in the same directory and then

@@ -247,7 +247,9 @@ class Material:
         _lam: float
         _K: float
 
-    def __init__(self, E=None, nu=None, *, mu=None, lam=None, K=None):
+    def __init__(self, E: float | None = None, nu: float | None = None, *,
+                 mu: float | None = None, lam: float | None = None,
+                 K: float | None = None) -> None:
         c = elastic_constants(E, nu, mu=mu, lam=lam, K=K, who=type(self).__name__)
         object.__setattr__(self, "E", c.E)
         object.__setattr__(self, "nu", c.nu)
@@ -302,7 +304,8 @@ class Material:
         """dP/dF with negative eigenvalues (as a 9x9 map) clamped to zero."""
         raise NotImplementedError
 
-    def stress_and_tangent(self, F: np.ndarray, project: bool = False):
+    def stress_and_tangent(self, F: np.ndarray,
+                           project: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """``(P, C)`` at once, C projected to PSD when ``project``: what Newton needs.
 
         Materials whose stress and tangent share expensive work (an SVD)

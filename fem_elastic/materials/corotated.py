@@ -125,7 +125,7 @@ class Corotated(IsotropicMaterial):
         """The volume term's ``d2psi/ds_a ds_b`` (the same for each a, b): ``lam`` (Pa)."""
         return self.lam
 
-    def singular_value_hessian(self, s: np.ndarray):
+    def singular_value_hessian(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Eigensystem of the Hessian in terms of the signed singular values.
 
         ``H_ab = 2 mu d_ab + lam``; ``lam_flip = 2 mu``;
@@ -169,7 +169,8 @@ class Corotated(IsotropicMaterial):
     def _hessian(self, F, clamp):
         return self.stress_and_tangent(F, project=clamp)[1]
 
-    def stress_and_tangent(self, F: np.ndarray, project: bool = False):
+    def stress_and_tangent(self, F: np.ndarray,
+                           project: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """``(P, C)`` from one signed SVD (the stress alone needs one too)."""
         F, batch = _flat(F)
         U, s, V = signed_svd(F)

@@ -61,7 +61,8 @@ import math
 import warnings
 import weakref
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 import numpy as np
 
@@ -87,7 +88,7 @@ _FORMS = "psi(F, <params>) (an energy of the deformation gradient) or psi(I1, I2
     "(of the invariants of C = F^T F)"
 
 
-def material_from_energy(psi, **params) -> EnergyMaterial:
+def material_from_energy(psi: Callable[..., Any], **params: float) -> EnergyMaterial:
     """A material from its strain-energy density alone; its derivatives are generated.
 
     Parameters
@@ -563,7 +564,20 @@ class EnergyMaterial(Material):
         """
         return self.stress_and_tangent(F, project=True, stress=False)[1]
 
-    def stress_and_tangent(self, F: np.ndarray, project: bool = False, stress: bool = True):
+    @overload
+    def stress_and_tangent(self, F: np.ndarray, project: bool = False,
+                           stress: Literal[True] = True) -> tuple[np.ndarray, np.ndarray]: ...
+
+    @overload
+    def stress_and_tangent(self, F: np.ndarray, project: bool,
+                           stress: Literal[False]) -> tuple[None, np.ndarray]: ...
+
+    @overload
+    def stress_and_tangent(self, F: np.ndarray, project: bool = False, *,
+                           stress: Literal[False]) -> tuple[None, np.ndarray]: ...
+
+    def stress_and_tangent(self, F: np.ndarray, project: bool = False,
+                           stress: bool = True) -> tuple[np.ndarray | None, np.ndarray]:
         """``(P, C)`` from one evaluation of the generated derivatives: what Newton needs.
 
         Parameters
@@ -678,7 +692,7 @@ class EnergyMaterial(Material):
         _mask(C, ok)
         return C
 
-    def singular_value_hessian(self, s: np.ndarray):
+    def singular_value_hessian(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Eigensystem of the Hessian of an invariant-form energy from its signed singular values.
 
         ``H_ab = sum_pq psi_pq g_pa g_qb + 2 psi_1 d_ab + psi_2 h2_ab + psi_J hJ_ab`` with

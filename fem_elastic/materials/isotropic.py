@@ -288,7 +288,7 @@ class IsotropicMaterial(Material):
     lam_flip (3, N))``, from which :meth:`d2psi_dF2_psd` is built.
     """
 
-    def singular_value_hessian(self, s: np.ndarray):  # pragma: no cover - abstract
+    def singular_value_hessian(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - abstract
         raise NotImplementedError
 
     def d2psi_dF2_psd(self, F: np.ndarray) -> np.ndarray:

@@ -166,7 +166,7 @@ class NeoHookean(IsotropicMaterial):
         _add_identity_term(C, self.mu)
         return C.reshape((3, 3, 3, 3) + batch)
 
-    def singular_value_hessian(self, s: np.ndarray):
+    def singular_value_hessian(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Eigensystem of the Hessian in terms of the signed singular values.
 
         With ``g = lam ln J - mu`` (so ``psi_i = mu s_i + g / s_i``):

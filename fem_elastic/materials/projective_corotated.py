@@ -109,7 +109,9 @@ class ProjectiveCorotated(Corotated):
     sigma_min: float = 1.0
     sigma_max: float = 1.0
 
-    def __init__(self, E=None, nu=None, *, mu=None, lam=None, K=None, sigma_min=1.0, sigma_max=1.0):
+    def __init__(self, E: float | None = None, nu: float | None = None, *,
+                 mu: float | None = None, lam: float | None = None, K: float | None = None,
+                 sigma_min: float = 1.0, sigma_max: float = 1.0) -> None:
         super().__init__(E, nu, mu=mu, lam=lam, K=K)
         for name, value in (("sigma_min", sigma_min), ("sigma_max", sigma_max)):
             if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) \
@@ -187,7 +189,7 @@ class ProjectiveCorotated(Corotated):
         return _overflow_to_inf(out, F).reshape(batch)
 
     # what the local step of projective dynamics needs -----------------------------------
-    def projections(self, F: np.ndarray):
+    def projections(self, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(R, delta)`` at each F (3, 3, N): the strain target R and volume shift delta.
 
         The volume target is ``F - delta R``; the combined weighted target of one

@@ -175,7 +175,7 @@ class StableNeoHookean(IsotropicMaterial):
         _add_identity_term(C, mu_ * (1.0 - ic1))
         return C.reshape((3, 3, 3, 3) + batch)
 
-    def singular_value_hessian(self, s: np.ndarray):
+    def singular_value_hessian(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Eigensystem of the Hessian in terms of the signed singular values.
 
         With ``m = mu' (1 - 1/(I_C + 1))`` and ``h = lam' (J - alpha)``

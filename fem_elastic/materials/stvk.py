@@ -148,7 +148,7 @@ class StVK(IsotropicMaterial):
                     C[i, j, k, j] += mu * B[i, k]
         return C.reshape((3, 3, 3, 3) + batch)
 
-    def singular_value_hessian(self, s: np.ndarray):
+    def singular_value_hessian(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Eigensystem of the Hessian in terms of the signed singular values.
 
         With ``psi_i = s_i (mu (s_i^2 - 1) + t)``, ``t = lam/2 sum_k (s_k^2 - 1)``:

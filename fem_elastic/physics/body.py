@@ -16,11 +16,22 @@ velocity is uniform over the body's nodes.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import InvalidParameter
+
+if TYPE_CHECKING:  # for annotations only
+    from skfem import MeshTet
+
+    from .driven import Motion
+    from .elastic_body import ElasticBody
+    from .springs import MassSpring
+    from .supports import DisplacementSpec, FixedSpec
 
 __all__ = ["Body", "rotation_matrix"]
 
@@ -115,9 +126,12 @@ class Body:
     1.0
     """
 
-    def __init__(self, mesh, density, body, fixed=None, driven=None, displacement=None,
-                 traction=None, name: str = "body", translate=(0.0, 0.0, 0.0), rotate=None,
-                 velocity=(0.0, 0.0, 0.0)):
+    def __init__(self, mesh: MeshTet, density: float, body: ElasticBody | MassSpring,
+                 fixed: FixedSpec | None = None, driven: Mapping[str, Motion] | None = None,
+                 displacement: DisplacementSpec | None = None,
+                 traction: Mapping[str, ArrayLike] | None = None, name: str = "body",
+                 translate: ArrayLike = (0.0, 0.0, 0.0), rotate: ArrayLike | None = None,
+                 velocity: ArrayLike = (0.0, 0.0, 0.0)) -> None:
         if not isinstance(name, str) or not name.strip():
             raise InvalidParameter(f"a body's name must be a non-empty string, e.g. 'ball'; got {name!r}.")
         if not hasattr(mesh, "p") or not hasattr(mesh, "t"):

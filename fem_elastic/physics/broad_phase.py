@@ -27,6 +27,7 @@ The narrow phase (exact distances between the candidates) is the caller's:
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
 from ..errors import InvalidParameter
@@ -89,7 +90,7 @@ class BoundingSpheres:
     ([0], [1])
     """
 
-    def __init__(self, centers, radii):
+    def __init__(self, centers: ArrayLike, radii: float | ArrayLike) -> None:
         self.centers, self.radii = _as_spheres(centers, radii)
         self.r_max = float(self.radii.max()) if self.radii.size else 0.0
         self.tree = cKDTree(self.centers)
@@ -97,7 +98,8 @@ class BoundingSpheres:
     def __len__(self) -> int:
         return int(self.centers.shape[0])
 
-    def query(self, centers, radii, margin: float = 0.0):
+    def query(self, centers: ArrayLike, radii: float | ArrayLike,
+              margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """Pairs of overlapping spheres between ``(centers, radii)`` and the tree.
 
         Sphere ``i`` of the query and ``j`` of the tree are a pair when
@@ -123,7 +125,7 @@ class BoundingSpheres:
         order = np.lexsort((j, i))
         return i[order], j[order]
 
-    def self_pairs(self, margin: float = 0.0):
+    def self_pairs(self, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """Pairs ``i < j`` of overlapping spheres within the tree (inflated by ``margin``, m).
 
         Returns

@@ -17,11 +17,16 @@ simulation the gap this leaves is second order in the element size; give
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import InvalidMesh
+
+if TYPE_CHECKING:  # for annotations only (the model imports this module)
+    from .model import Model
 
 __all__ = ["CollisionSurface", "collision_surface", "surface_triangles"]
 
@@ -121,7 +126,8 @@ class CollisionSurface:
         return np.asarray(dx)[self.vertex_dofs]
 
     @classmethod
-    def stack(cls, surfaces, dof_offsets) -> "CollisionSurface":
+    def stack(cls, surfaces: Sequence[CollisionSurface],
+              dof_offsets: Sequence[int] | np.ndarray) -> "CollisionSurface":
         """The surfaces of several bodies as one, DOF indices offset and body ids set.
 
         Parameters
@@ -163,7 +169,7 @@ class CollisionSurface:
         )
 
 
-def collision_surface(model) -> CollisionSurface:
+def collision_surface(model: Model) -> CollisionSurface:
     """The collision surface of a single-body :class:`fe.Model`.
 
     The boundary triangles of the tet mesh (faces of exactly one tet),

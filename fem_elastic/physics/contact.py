@@ -285,7 +285,8 @@ class ContactPotential(Potential):
         act, _, Hl = self._local(x, True, project)
         return self._block_diagonal(act, Hl)
 
-    def linearize(self, x: np.ndarray, project: bool = False):
+    def linearize(self, x: np.ndarray,
+                  project: bool = False) -> tuple[np.ndarray, sp.spmatrix | None]:
         """Gradient (N) and Hessian (N/m) at once, sharing the distance queries."""
         act, gl, Hl = self._local(x, True, project)
         return self._scatter_gradient(act, gl), self._block_diagonal(act, Hl)

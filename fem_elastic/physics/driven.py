@@ -16,12 +16,24 @@ from __future__ import annotations
 import math
 import numbers
 
+from collections.abc import Callable
+from typing import Literal, overload
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import InvalidParameter
 from .loads import as_vector3
 
 __all__ = ["Motion", "Twist", "Translate", "Prescribed"]
+
+
+@overload
+def _check_time(value: float, name: str, allow_none: Literal[False] = False) -> float: ...
+
+
+@overload
+def _check_time(value: float | None, name: str, allow_none: bool) -> float | None: ...
 
 
 def _check_time(value, name: str, allow_none: bool = False) -> float | None:
@@ -45,7 +57,7 @@ class Motion:
         Time (s) from which the nodes are free; None holds them forever.
     """
 
-    def __init__(self, release: float | None = None):
+    def __init__(self, release: float | None = None) -> None:
         self.release = _check_time(release, "release", allow_none=True)
 
     def active(self, t: float) -> bool:
@@ -104,7 +116,8 @@ class Twist(Motion):
     array([[ 0., -1.,  1.]])
     """
 
-    def __init__(self, angle: float, duration: float, axis=(1.0, 0.0, 0.0), center=None, release=None):
+    def __init__(self, angle: float, duration: float, axis: ArrayLike = (1.0, 0.0, 0.0),
+                 center: ArrayLike | None = None, release: float | None = None) -> None:
         super().__init__(release)
         if isinstance(angle, bool) or not isinstance(angle, numbers.Real) or not math.isfinite(angle):
             raise InvalidParameter(f"Twist angle must be a finite number (rad), got {angle!r}.")
@@ -127,13 +140,13 @@ class Twist(Motion):
         kdr = r @ k
         return r, k, kxr, kdr, theta, self.angle * rate
 
-    def displacement(self, X, t):
+    def displacement(self, X: np.ndarray, t: float) -> np.ndarray:
         r, k, kxr, kdr, th, _ = self._geometry(np.asarray(X, float), t)
         # Rodrigues' rotation of r about k by th
         rot = r * math.cos(th) + kxr * math.sin(th) + np.outer(kdr, k) * (1 - math.cos(th))
         return rot - r
 
-    def velocity(self, X, t):
+    def velocity(self, X: np.ndarray, t: float) -> np.ndarray:
         r, k, kxr, kdr, th, omega = self._geometry(np.asarray(X, float), t)
         rot = r * math.cos(th) + kxr * math.sin(th) + np.outer(kdr, k) * (1 - math.cos(th))
         return omega * np.cross(k, rot)
@@ -158,16 +171,16 @@ class Translate(Motion):
     array([[ 0. ,  0. , -0.5]])
     """
 
-    def __init__(self, offset, duration: float, release=None):
+    def __init__(self, offset: ArrayLike, duration: float, release: float | None = None) -> None:
         super().__init__(release)
         self.offset = as_vector3(offset, "Translate offset", "m", "(0.0, 0.0, -0.05)")
         self.duration = _check_time(duration, "Translate duration")
 
-    def displacement(self, X, t):
+    def displacement(self, X: np.ndarray, t: float) -> np.ndarray:
         s, _ = self._ramp(t, self.duration)
         return np.broadcast_to(s * self.offset, np.shape(X)).copy()
 
-    def velocity(self, X, t):
+    def velocity(self, X: np.ndarray, t: float) -> np.ndarray:
         _, rate = self._ramp(t, self.duration)
         return np.broadcast_to(rate * self.offset, np.shape(X)).copy()
 
@@ -192,14 +205,16 @@ class Prescribed(Motion):
     0.01
     """
 
-    def __init__(self, function, velocity=None, release=None):
+    def __init__(self, function: Callable[[np.ndarray, float], ArrayLike],
+                 velocity: Callable[[np.ndarray, float], ArrayLike] | None = None,
+                 release: float | None = None) -> None:
         super().__init__(release)
         if not callable(function):
             raise InvalidParameter(f"Prescribed needs a function (X, t) -> displacement, got {function!r}.")
         self.function = function
         self._velocity = velocity
 
-    def displacement(self, X, t):
+    def displacement(self, X: np.ndarray, t: float) -> np.ndarray:
         u = np.asarray(self.function(X, t), dtype=float)
         if u.shape != np.shape(X):
             raise InvalidParameter(
@@ -207,7 +222,7 @@ class Prescribed(Motion):
             )
         return u
 
-    def velocity(self, X, t):
+    def velocity(self, X: np.ndarray, t: float) -> np.ndarray:
         if self._velocity is None:
             return super().velocity(X, t)
         return np.asarray(self._velocity(X, t), dtype=float)

@@ -53,6 +53,8 @@ from __future__ import annotations
 
 import logging
 
+from typing import TYPE_CHECKING, cast
+
 import numpy as np
 
 from .elastic_body import ElasticPotential
@@ -60,6 +62,10 @@ from ..errors import InvalidParameter
 from ..materials.base import _det
 from ..geometry.mesh import _signed_volumes
 from .springs import SpringPotential
+
+if TYPE_CHECKING:  # for annotations only (the model imports this module's neighbours)
+    from .model import Model
+    from .multibody import AnyModel, MultiBody
 
 __all__ = ["CellFields", "cell_fields", "von_mises"]
 
@@ -144,16 +150,16 @@ class CellFields:
     (['energy_density', 'von_mises'], 0.0, 0.0)
     """
 
-    def __init__(self, model):
+    def __init__(self, model: AnyModel) -> None:
         self.model = model
         parts = getattr(model, "models", None)
         if parts is not None:  # a fe.MultiBody: each body's fields, the bodies' tets stacked
             self._parts = [CellFields(m) for m in parts]
             self.potential = model.body_potential
-            self.volume = np.concatenate([f.volume for f in self._parts])
+            self.volume: np.ndarray = np.concatenate([f.volume for f in self._parts])
             self._evaluate = self._stacked
             return
-        space = model.space
+        space = cast("Model", model).space  # a Model here (a MultiBody returned above)
         self.potential = pot = model.body_potential
         #: ``(n_tets,)`` reference volume of each tet (m^3).
         self.volume = np.asarray(space.dx, dtype=float).sum(axis=1)
@@ -217,7 +223,7 @@ class CellFields:
         """
         x = self._check(x)
         if getattr(self, "_parts", None) is not None:
-            return np.concatenate([f.stress(xb) for f, (_, xb) in zip(self._parts, self.model._split(x))], axis=2)
+            return np.concatenate([f.stress(xb) for f, (_, xb) in zip(self._parts, cast("MultiBody", self.model)._split(x))], axis=2)
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             if isinstance(self.potential, ElasticPotential):
                 sig, J, _ = self._fem_parts(x)
@@ -239,7 +245,7 @@ class CellFields:
         ``body`` (float, for VTU cell data) is the index of each tet's body in
         ``model.bodies``, which lets ParaView and the renderer tell the bodies apart.
         """
-        parts = [f._evaluate(xb) for f, (_, xb) in zip(self._parts, self.model._split(x))]
+        parts = [f._evaluate(xb) for f, (_, xb) in zip(self._parts, cast("MultiBody", self.model)._split(x))]
         out = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
         out["body"] = self.model.body_of_tet.astype(float)
         return out
@@ -337,7 +343,7 @@ class CellFields:
         return {"von_mises": vm, "energy_density": energy}
 
 
-def cell_fields(model, x: np.ndarray) -> dict[str, np.ndarray]:
+def cell_fields(model: AnyModel, x: np.ndarray) -> dict[str, np.ndarray]:
     """Per-tet von Mises stress and strain-energy density at positions ``x``.
 
     See the module notes for the definitions (Cauchy stress ``P F^T / J``

@@ -69,10 +69,17 @@ import math
 import numbers
 import warnings
 
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import InvalidParameter
 from .broad_phase import BoundingSpheres, sphere_pairs, triangle_spheres
+
+if TYPE_CHECKING:  # for annotations only (the model imports this module)
+    from .collision_surface import CollisionSurface
+    from .multibody import AnyModel
 
 __all__ = ["ImpulseContact", "BoundImpulseContact", "collide_particles", "closest_point_triangle",
            "reject_impulse_contact", "RestContactWarning"]
@@ -313,7 +320,9 @@ def separate(idx, wts, normal, target, P, inv_m, iterations=10):
 
 
 # -- particles ---------------------------------------------------------------------------------
-def collide_particles(x, v, m, radius, restitution=0.0, friction=0.0, iterations=50):
+def collide_particles(x: ArrayLike, v: ArrayLike, m: ArrayLike, radius: float | ArrayLike,
+                      restitution: float = 0.0, friction: float = 0.0,
+                      iterations: int = 50) -> tuple[np.ndarray, np.ndarray]:
     """Particle-particle impulse collisions (the notes' response, with radius and friction).
 
     Particles are spheres of radius ``r``; those that overlap (``|x_i - x_j|
@@ -420,7 +429,8 @@ class ImpulseContact:
 
     kind = "impulse"
 
-    def __init__(self, restitution=0.0, friction=0.0, thickness=1e-3, self_contact=True, iterations=50):
+    def __init__(self, restitution: float = 0.0, friction: float = 0.0, thickness: float = 1e-3,
+                 self_contact: bool = True, iterations: int = 50) -> None:
         self.restitution = _check_restitution(restitution)
         self.friction = _check_friction(friction)
         bad = isinstance(thickness, bool) or not isinstance(thickness, numbers.Real)
@@ -439,7 +449,7 @@ class ImpulseContact:
         return (f"fe.ImpulseContact(restitution={self.restitution:g}, friction={self.friction:g}, "
                 f"thickness={self.thickness:g})")
 
-    def bind(self, model) -> "BoundImpulseContact":
+    def bind(self, model: AnyModel) -> "BoundImpulseContact":
         """The response on ``model``'s collision surface (``model.collision_surface()``)."""
         return BoundImpulseContact(self, model.collision_surface(), model)
 
@@ -457,7 +467,8 @@ class BoundImpulseContact:
 
     kind = "impulse"
 
-    def __init__(self, settings, surface, model=None):
+    def __init__(self, settings: ImpulseContact, surface: CollisionSurface,
+                 model: AnyModel | None = None) -> None:
         self.settings = settings
         self.surface = surface
         self.nodes = np.asarray(surface.vertex_dofs[:, 0] // 3, dtype=np.int64)  # node of each vertex
@@ -550,7 +561,8 @@ class BoundImpulseContact:
         close &= same
         return np.unique(vi[close] * len(self.surface.faces) + tj[close])
 
-    def contacts(self, x):
+    def contacts(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                               np.ndarray]:
         """The vertex-triangle contacts at ``x``: ``(vertex, triangle, distance (m), weights, normal)``."""
         P = self.surface.positions(x)
         vi, tj = self._candidates(P, self.settings.thickness)
@@ -559,7 +571,8 @@ class BoundImpulseContact:
         return vi[on], tj[on], dist[on], w[on], n[on]
 
     # response -------------------------------------------------------------------------------
-    def respond(self, x, v, mass):
+    def respond(self, x: np.ndarray, v: np.ndarray,
+                mass: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Impulses and separation of the surface contacts at ``x`` (module notes); new ``(x, v)``.
 
         Parameters
@@ -598,7 +611,7 @@ class BoundImpulseContact:
         return x, v
 
     # diagnostics ----------------------------------------------------------------------------
-    def min_distance(self, x, reach=None) -> float:
+    def min_distance(self, x: np.ndarray, reach: float | None = None) -> float:
         """Smallest vertex-triangle distance (m) between parts of the surface that may collide.
 
         Parameters
@@ -626,7 +639,7 @@ class BoundImpulseContact:
                 return best if best <= limit else math.inf
             r = min(4.0 * r, limit)
 
-    def has_intersections(self, x) -> bool:
+    def has_intersections(self, x: np.ndarray) -> bool:
         """Whether the surface at ``x`` intersects itself: an edge crossing a triangle.
 
         Every surface edge against the triangles that do not share a vertex
@@ -663,7 +676,7 @@ class BoundImpulseContact:
             hit = (np.abs(det) > 0.0) & (u >= 0.0) & (w >= 0.0) & (u + w <= 1.0) & (t >= 0.0) & (t <= 1.0)
         return bool(hit.any())
 
-    def diagnostics(self, x) -> dict:
+    def diagnostics(self, x: np.ndarray) -> dict[str, Any]:
         """Contact state at ``x``.
 
         Returns

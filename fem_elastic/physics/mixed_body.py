@@ -243,7 +243,7 @@ class MixedPotential(ElasticPotential):
     True
     """
 
-    def __init__(self, material: Material, space: Discretization):
+    def __init__(self, material: Material, space: Discretization) -> None:
         check_mixed(material, space.order)
         super().__init__(material, space)
         self.split = volumetric_split(material)
@@ -318,7 +318,8 @@ class MixedPotential(ElasticPotential):
     def hessian(self, x: np.ndarray, project: bool = False) -> sp.csr_matrix:
         return self.linearize(x, project=project)[1]
 
-    def linearize(self, x: np.ndarray, project: bool = False):
+    def linearize(self, x: np.ndarray,
+                  project: bool = False) -> tuple[np.ndarray, sp.spmatrix | None]:
         F = self.F(x)
         _, D, theta = self._volume_ratio(F)
         split = self.split

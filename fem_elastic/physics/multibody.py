@@ -36,25 +36,41 @@ own warped stiffness; VTU output takes linear (P1) bodies.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from functools import cached_property
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple, TypeAlias, Union
 
 import numpy as np
 import scipy.sparse as sp
+from numpy.typing import ArrayLike
 from skfem import MeshTet
 
 from ..errors import InvalidParameter, UnderConstrained
 from .body import Body
 from .model import Model, bind_contact
 
-__all__ = ["BodyBoundary", "MultiBody", "StackedSpace"]
+if TYPE_CHECKING:  # for annotations only (pyvista is optional)
+    from typing import Unpack  # Python >= 3.11
+
+    import pyvista
+
+    from .collision_surface import CollisionSurface
+    from .damping import Rayleigh
+    from .impulse_contact import ImpulseContact
+    from .ipc_contact import IPCContact
+    from .obstacles import Obstacle
+    from .potential import Potential
+    from .pyvista_grid import PlotOptions
+    from .supports import Where
+
+__all__ = ["BodyBoundary", "MultiBody", "StackedSpace", "AnyModel"]
 
 
 class BodyBoundary(NamedTuple):
     """A support of one body of a MultiBody: the body's name and the support as it gave it."""
 
     body: str
-    where: object
+    where: Where
 
 
 class _UnownedPattern:
@@ -209,7 +225,10 @@ class MultiBody:
     (72, ('a', 'b'))
     """
 
-    def __init__(self, bodies, gravity=None, ground=None, damping=None, contact=None):
+    def __init__(self, bodies: Sequence[Body], gravity: ArrayLike | None = None,
+                 ground: Obstacle | Sequence[Obstacle] | None = None,
+                 damping: Rayleigh | None = None,
+                 contact: IPCContact | ImpulseContact | None = None) -> None:
         if isinstance(bodies, Body) or not isinstance(bodies, (list, tuple)):
             raise InvalidParameter(
                 "bodies must be a list of fe.Body(...), e.g. [fe.Body(mesh_a, ..., name='a'), "
@@ -298,12 +317,12 @@ class MultiBody:
         o = self.dof_offsets
         return [(m, x[o[b]:o[b + 1]]) for b, m in enumerate(self.models)]
 
-    def body_slice(self, which) -> slice:
+    def body_slice(self, which: int | str) -> slice:
         """The DOFs of one body (by index or name) in the stacked vector, a slice."""
         b = self.index(which)
         return slice(int(self.dof_offsets[b]), int(self.dof_offsets[b + 1]))
 
-    def index(self, which) -> int:
+    def index(self, which: int | str) -> int:
         """The index of a body given by its index or its name."""
         if isinstance(which, str):
             if which not in self.names:
@@ -388,24 +407,26 @@ class MultiBody:
         return np.array([m.energy(xb) for m, xb in self._split(x)])
 
     # dissipation ----------------------------------------------------------------------
-    def damping_force(self, x, v, mass: str = "lumped"):
+    def damping_force(self, x: np.ndarray, v: np.ndarray,
+                      mass: str = "lumped") -> np.ndarray | None:
         """The damping force (N), ``(ndofs,)``, or None when no body is damped."""
         parts = [m.damping_force(xb, vb, mass) for (m, xb), (_, vb) in zip(self._split(x), self._split(v))]
         if all(p is None for p in parts):
             return None
         return np.concatenate([np.zeros(m.ndofs) if p is None else p for m, p in zip(self.models, parts)])
 
-    def damping_matrix(self, x, mass: str = "consistent"):
+    def damping_matrix(self, x: np.ndarray,
+                       mass: str = "consistent") -> sp.csr_matrix | None:
         """C (N s/m), block diagonal, or None when no body is damped."""
         return _block_diag([m.damping_matrix(xb, mass) for m, xb in self._split(x)],
                            [m.ndofs for m in self.models])
 
-    def damping_stiffness(self, x) -> sp.csr_matrix:
+    def damping_stiffness(self, x: np.ndarray) -> sp.csr_matrix:
         """The bodies' damping stiffness K(x) (N/m), block diagonal."""
         return _block_diag([m.damping_stiffness(xb) for m, xb in self._split(x)])
 
     @property
-    def warped_stiffness(self):
+    def warped_stiffness(self) -> None:
         """None: stiffness warping takes one body (each body's is ``model.models[b].warped_stiffness``)."""
         return None
 
@@ -432,7 +453,8 @@ class MultiBody:
             g += self.contact.gradient(x)
         return g
 
-    def linearize(self, x: np.ndarray, load_factor: float = 1.0, project: bool = True, body=None):
+    def linearize(self, x: np.ndarray, load_factor: float = 1.0, project: bool = True,
+                  body: Potential | None = None) -> tuple[np.ndarray, sp.csr_matrix]:
         """Gradient (N) and Hessian (N/m, CSR, block diagonal plus the contact's) of Pi at x."""
         if body is not None:
             raise InvalidParameter(
@@ -469,7 +491,7 @@ class MultiBody:
         return B
 
     # contact, supports, driven boundaries ---------------------------------------------
-    def collision_surface(self):
+    def collision_surface(self) -> CollisionSurface:
         """The bodies' boundary surfaces stacked (DOFs offset, body ids set), cached."""
         surface = self.__dict__.get("_collision_surface")
         if surface is None:
@@ -485,7 +507,7 @@ class MultiBody:
             return 1.0
         return float(self.contact.max_step(x, dx))
 
-    def respond_contacts(self, x: np.ndarray, v: np.ndarray):
+    def respond_contacts(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each body's obstacle impulses, then the impulse contact between bodies; returns (x, v)."""
         o = self.dof_offsets
         x, v = x.copy(), v.copy()
@@ -496,7 +518,7 @@ class MultiBody:
             x, v = self.contact.respond(x, v, self.lumped_mass[0::3])
         return x, v
 
-    def constraints(self, t: float):
+    def constraints(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """DOFs held at time ``t`` (s), their positions (m) and velocities (m/s), all bodies."""
         parts = [m.constraints(t) for m in self.models]
         return (np.concatenate([d + off for (d, _, _), off in zip(parts, self.dof_offsets)]).astype(np.int64),
@@ -518,7 +540,7 @@ class MultiBody:
             except UnderConstrained as err:
                 raise UnderConstrained(f"body {b.name!r}: {err}") from None
 
-    def boundary_nodes(self, where):
+    def boundary_nodes(self, where: BodyBoundary) -> np.ndarray:
         """Stacked scalar nodes of one body's boundary, given as ``BodyBoundary(body, where)``.
 
         A bare boundary name is ambiguous over several meshes: InvalidParameter.
@@ -539,7 +561,8 @@ class MultiBody:
             "the MultiBody."
         )
 
-    def to_pyvista(self, x: np.ndarray | None = None, v: np.ndarray | None = None):
+    def to_pyvista(self, x: np.ndarray | None = None,
+                   v: np.ndarray | None = None) -> pyvista.UnstructuredGrid:
         """The bodies at DOF positions ``x`` (default: at rest) as one pyvista ``UnstructuredGrid``.
 
         As :meth:`fem_elastic.Model.to_pyvista`, with the cell data ``body`` (each
@@ -554,7 +577,8 @@ class MultiBody:
 
         return body_grid(self, x, v)
 
-    def plot(self, x: np.ndarray | None = None, **kwargs):
+    def plot(self, x: np.ndarray | None = None,
+             **kwargs: Unpack[PlotOptions]) -> pyvista.Plotter:
         """Draw the bodies (at ``x``, default at rest) with pyvista; returns the plotter."""
         from .pyvista_grid import plot_grid
 
@@ -580,3 +604,7 @@ class MultiBody:
         from .result_view import html_table
 
         return html_table("MultiBody", self._rows())
+
+
+#: What solvers, integrators and output take as a model: one body's Model or a MultiBody.
+AnyModel: TypeAlias = Union[Model, MultiBody]

@@ -10,9 +10,12 @@ methods and how their stiffness is chosen are in :mod:`fem_elastic.physics.conta
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING, Literal, TypedDict
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from ..discretization.space import Discretization
 from ..errors import InvalidParameter
 from .contact import (
     _BARRIER_SLOPE_AT_HALF,
@@ -24,7 +27,22 @@ from .contact import (
     _positive,
 )
 
+if TYPE_CHECKING:
+    from typing import Unpack  # Python >= 3.11
+
 __all__ = ["Box", "Ground", "Obstacle", "Sphere"]
+
+
+class ObstacleOptions(TypedDict, total=False):
+    """The keywords every obstacle takes (:class:`Obstacle`'s parameters), for ``**options``."""
+
+    method: Literal["penalty", "barrier", "impulse"]
+    stiffness: float | None
+    penetration: float
+    dhat: float
+    restitution: float
+    friction: float
+    gravity: float | None
 
 
 # ---------------------------------------------------------------------------------------
@@ -82,8 +100,10 @@ class Obstacle:
     [0.5, 0.5, 0.5]
     """
 
-    def __init__(self, *, method="penalty", stiffness=None, penetration=1e-3, dhat=1e-3,
-                 restitution=0.0, friction=0.0, gravity=None):
+    def __init__(self, *, method: Literal["penalty", "barrier", "impulse"] = "penalty",
+                 stiffness: float | None = None, penetration: float = 1e-3, dhat: float = 1e-3,
+                 restitution: float = 0.0, friction: float = 0.0,
+                 gravity: float | None = None) -> None:
         if not isinstance(method, str) or method not in METHODS:
             raise InvalidParameter(
                 f"method must be one of {METHODS!r}, got {method!r}: 'penalty' (springs, "
@@ -116,7 +136,7 @@ class Obstacle:
             )
 
     # geometry: subclasses ----------------------------------------------------------------
-    def signed_distance(self, p) -> np.ndarray:  # pragma: no cover - abstract
+    def signed_distance(self, p: ArrayLike) -> np.ndarray:  # pragma: no cover - abstract
         """Signed distance (m) of points ``p`` ``(n, 3)``: > 0 outside, < 0 inside; ``(n,)``."""
         raise NotImplementedError
 
@@ -124,7 +144,7 @@ class Obstacle:
         """(d (n,), n (n, 3), Hd (n, 3, 3) or None where it is zero)."""
         raise NotImplementedError
 
-    def normal(self, p) -> np.ndarray:
+    def normal(self, p: ArrayLike) -> np.ndarray:
         """Outward unit normals ``grad d`` at points ``p`` ``(n, 3)``, shape ``(n, 3)``."""
         return self._derivatives(_as_points(p))[1]
 
@@ -146,7 +166,7 @@ class Obstacle:
             return self.gravity
         return float(gravity) if gravity else 9.81
 
-    def node_stiffness(self, nodal_mass, gravity=None) -> float:
+    def node_stiffness(self, nodal_mass: ArrayLike, gravity: float | None = None) -> float:
         """The per-node stiffness (N/m) the rules give a body with these nodal masses.
 
         Penalty: ``k = M |g| / penetration``; barrier:
@@ -167,7 +187,7 @@ class Obstacle:
             return M * self._g(gravity) / self.penetration
         return M * self._g(gravity) / (_BARRIER_SLOPE_AT_HALF * self.dhat)
 
-    def critical_omega(self, nodal_mass, gravity=None) -> float:
+    def critical_omega(self, nodal_mass: ArrayLike, gravity: float | None = None) -> float:
         """Largest angular frequency (rad/s) of a node on its contact spring.
 
         ``max_i sqrt(k / m_i)`` for the penalty (the barrier: its stiffness at
@@ -194,7 +214,8 @@ class Obstacle:
         return float(np.sqrt(c * self.node_stiffness(m, gravity) / m.min()))
 
     # the two responses ---------------------------------------------------------------------
-    def build(self, space, nodal_mass, gravity=None):
+    def build(self, space: Discretization, nodal_mass: ArrayLike,
+              gravity: float | None = None) -> PenaltyContact | BarrierContact | None:
         """The contact Potential on every node of ``space``, or None for ``method="impulse"``.
 
         Parameters
@@ -294,7 +315,8 @@ class Obstacle:
             "outside it or just touching it."
         )
 
-    def respond(self, x, v, nodal_mass=None):
+    def respond(self, x: ArrayLike, v: ArrayLike,
+                nodal_mass: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Impulse response of penetrating nodes (``method="impulse"``).
 
         For every node with ``d < 0``: the position is projected onto the
@@ -397,7 +419,8 @@ class Ground(Obstacle):
     Ground(point=(0.0, 0.0, 1.0), normal=(0.0, 0.0, 1.0), method='penalty', penetration=0.001)
     """
 
-    def __init__(self, z=0.0, *, normal=(0.0, 0.0, 1.0), point=None, **options):
+    def __init__(self, z: float = 0.0, *, normal: ArrayLike = (0.0, 0.0, 1.0),
+                 point: ArrayLike | None = None, **options: Unpack[ObstacleOptions]) -> None:
         super().__init__(**options)
         nrm = _vector3(normal, "normal", "a direction")
         length = float(np.linalg.norm(nrm))
@@ -418,7 +441,7 @@ class Ground(Obstacle):
         for arr in (self.point, self.unit_normal):
             arr.setflags(write=False)
 
-    def signed_distance(self, p) -> np.ndarray:
+    def signed_distance(self, p: ArrayLike) -> np.ndarray:
         return (_as_points(p) - self.point) @ self.unit_normal
 
     def _derivatives(self, p):
@@ -454,13 +477,13 @@ class Sphere(Obstacle):
     [[0.0, 1.0, 0.0]]
     """
 
-    def __init__(self, center, radius, **options):
+    def __init__(self, center: ArrayLike, radius: float, **options: Unpack[ObstacleOptions]) -> None:
         super().__init__(**options)
         self.center = _vector3(center, "center", "m")
         self.center.setflags(write=False)
         self.radius = _positive(radius, "radius", "m", "0.1")
 
-    def signed_distance(self, p) -> np.ndarray:
+    def signed_distance(self, p: ArrayLike) -> np.ndarray:
         r = _as_points(p) - self.center
         return np.sqrt(np.einsum("ij,ij->i", r, r)) - self.radius
 
@@ -504,7 +527,8 @@ class Box(Obstacle):
     [[0.0, 0.0, 1.0]]
     """
 
-    def __init__(self, lower, upper, **options):
+    def __init__(self, lower: ArrayLike, upper: ArrayLike,
+                 **options: Unpack[ObstacleOptions]) -> None:
         super().__init__(**options)
         lo = _vector3(lower, "lower", "m")
         hi = _vector3(upper, "upper", "m")
@@ -517,7 +541,7 @@ class Box(Obstacle):
         for arr in (lo, hi):
             arr.setflags(write=False)
 
-    def signed_distance(self, p) -> np.ndarray:
+    def signed_distance(self, p: ArrayLike) -> np.ndarray:
         p = _as_points(p)
         below, above = self.lower - p, p - self.upper  # > 0 outside a slab, (n, 3)
         m = np.maximum(below, above)

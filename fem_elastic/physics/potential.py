@@ -33,7 +33,8 @@ class Potential:
     def hessian(self, x: np.ndarray, project: bool = False) -> sp.spmatrix | None:  # pragma: no cover
         raise NotImplementedError
 
-    def linearize(self, x: np.ndarray, project: bool = False):
+    def linearize(self, x: np.ndarray,
+                  project: bool = False) -> tuple[np.ndarray, sp.spmatrix | None]:
         """Gradient and Hessian at once (terms that share work override this)."""
         return self.gradient(x), self.hessian(x, project=project)
 
@@ -49,7 +50,7 @@ class LinearPotential(Potential):
         ``(ndofs,)`` reference positions (m); the energy is zero there.
     """
 
-    def __init__(self, force: np.ndarray, X: np.ndarray):
+    def __init__(self, force: np.ndarray, X: np.ndarray) -> None:
         self.force = np.asarray(force, dtype=float)
         self.X = X
 
@@ -59,5 +60,5 @@ class LinearPotential(Potential):
     def gradient(self, x: np.ndarray) -> np.ndarray:
         return -self.force
 
-    def hessian(self, x: np.ndarray, project: bool = False):
+    def hessian(self, x: np.ndarray, project: bool = False) -> None:
         return None

@@ -25,12 +25,35 @@ import os
 import sys
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING, Literal, TypedDict
 
 import numpy as np
 
 from ..errors import InvalidParameter, MissingDependency
 
-__all__ = ["body_grid", "plot_grid", "auto_magnification", "nodal_positions"]
+if TYPE_CHECKING:  # pyvista is optional: imported on first use
+    import pyvista
+
+__all__ = ["body_grid", "plot_grid", "auto_magnification", "nodal_positions",
+           "FrameOptions", "PlotOptions"]
+
+
+class FrameOptions(TypedDict, total=False):
+    """Keywords of :func:`plot_grid` besides the colours and the magnification (``.plot(**kw)``)."""
+
+    outline: bool
+    title: str | None
+    off_screen: bool | None
+    screenshot: str | os.PathLike[str] | None
+    window_size: tuple[int, int]
+    show: bool
+
+
+class PlotOptions(FrameOptions, total=False):
+    """Every keyword of :func:`plot_grid` (``Model.plot(x, **kw)``)."""
+
+    scalars: str
+    magnification: Literal["auto"] | float
 
 #: A deflection under this fraction of the body's size is magnified by default.
 SMALL_DEFLECTION = 0.05
@@ -244,9 +267,11 @@ def _quiet_window_probe():
 _UNITS = {"von_mises": "Pa", "energy_density": "J/m^3", "displacement": "m", "velocity": "m/s"}
 
 
-def plot_grid(grid, *, scalars: str = "von_mises", magnification="auto", outline: bool = True,
-              title: str | None = None, off_screen: bool | None = None, screenshot=None,
-              window_size=(800, 500), show: bool = True):
+def plot_grid(grid: pyvista.UnstructuredGrid, *, scalars: str = "von_mises",
+              magnification: Literal["auto"] | float = "auto", outline: bool = True,
+              title: str | None = None, off_screen: bool | None = None,
+              screenshot: str | os.PathLike[str] | None = None,
+              window_size: tuple[int, int] = (800, 500), show: bool = True) -> pyvista.Plotter:
     """Draw a grid of :func:`body_grid`: the deformed body, coloured, over its undeformed outline.
 
     Parameters

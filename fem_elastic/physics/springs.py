@@ -101,8 +101,10 @@ from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
+from numpy.typing import ArrayLike
+from skfem import MeshTet
 
-from ..discretization.space import Discretization
+from ..discretization.space import Discretization, SparsityPattern
 from ..errors import InvalidParameter
 from ..materials.base import lame_parameters
 from ..geometry.mesh import signed_volumes
@@ -173,7 +175,9 @@ class SpringPotential(Potential):
     100.0
     """
 
-    def __init__(self, X, edges, stiffness, rest_length=None, k_d=0.0, pattern=None):
+    def __init__(self, X: ArrayLike, edges: ArrayLike, stiffness: ArrayLike,
+                 rest_length: ArrayLike | None = None, k_d: float = 0.0,
+                 pattern: SparsityPattern | None = None) -> None:
         self.X = np.asarray(X, dtype=float)
         if self.X.ndim != 1 or self.X.size % 3:
             raise InvalidParameter(
@@ -292,7 +296,8 @@ class SpringPotential(Potential):
         l, n = self._geometry(x)
         return self._assemble(self._blocks(l, n, project))
 
-    def linearize(self, x: np.ndarray, project: bool = False):
+    def linearize(self, x: np.ndarray,
+                  project: bool = False) -> tuple[np.ndarray, sp.spmatrix | None]:
         """``(gradient, hessian)`` at once, sharing the lengths and directions."""
         l, n = self._geometry(x)
         g = self._scatter((self.stiffness * (l - self.rest_length))[:, None] * n)
@@ -414,7 +419,7 @@ def _warn_nu(nu, what):
         )
 
 
-def van_gelder_stiffness(mesh, E: float, nu: float = SPRING_POISSON_RATIO) -> np.ndarray:
+def van_gelder_stiffness(mesh: MeshTet, E: float, nu: float = SPRING_POISSON_RATIO) -> np.ndarray:
     """Spring constants of van Gelder (1998), 3-D form: ``k_e = E sum_{t ∋ e} V_t / l0_e^2``.
 
     The sum runs over the tets t that contain edge e, V_t their volumes.
@@ -454,7 +459,7 @@ def van_gelder_stiffness(mesh, E: float, nu: float = SPRING_POISSON_RATIO) -> np
     return E * sumV / _edge_lengths(mesh) ** 2
 
 
-def lloyd_stiffness(mesh, E: float, nu: float = SPRING_POISSON_RATIO) -> np.ndarray:
+def lloyd_stiffness(mesh: MeshTet, E: float, nu: float = SPRING_POISSON_RATIO) -> np.ndarray:
     """Spring constants fitted per tet to the linear FEM stiffness (after Lloyd et al. 2007).
 
     For each tet t, the six constants ``k^t`` minimise the Frobenius norm::

@@ -64,6 +64,7 @@ import scipy.sparse as sp
 from ..discretization.space import Discretization
 from .elastic_body import ElasticPotential
 from ..errors import InvalidParameter
+from ..materials.base import Material
 from ..materials.svd import polar_rotation
 from .potential import Potential
 
@@ -124,7 +125,7 @@ class WarpedStiffness(Potential):
     (True, True)
     """
 
-    def __init__(self, space: Discretization, material):
+    def __init__(self, space: Discretization, material: Material) -> None:
         if not isinstance(space, Discretization):
             raise InvalidParameter(
                 f"space must be a fem_elastic Discretization (P1 or P2 tets), got {type(space).__name__}."
@@ -337,7 +338,8 @@ class WarpedStiffness(Potential):
         R, _ = self._local(x)
         return self._matrix(R)
 
-    def linearize(self, x: np.ndarray, project: bool = False):
+    def linearize(self, x: np.ndarray,
+                  project: bool = False) -> tuple[np.ndarray, sp.spmatrix | None]:
         """Force and stiffness of the scheme at x, sharing the rotations.
 
         Parameters

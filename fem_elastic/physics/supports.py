@@ -26,9 +26,11 @@ leaves free ("translation along x", "rotation about an axis along z through
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
+from typing import TypeAlias, Union
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import InvalidParameter
 from ..geometry.mesh import boundary_facets
@@ -37,7 +39,21 @@ __all__ = [
     "COMPONENT_FORMS", "FIXED_FORMS", "DISPLACEMENT_FORMS",
     "parse_components", "nodes_of", "resolve_fixed", "resolve_displacement",
     "describe_rigid_modes", "label_of",
+    "Where", "Components", "FixedSpec", "DisplacementSpec",
 ]
+
+# The forms below as types (for annotations; the checks at run time are the functions here).
+#: Where: a boundary name, several names, vertex indices or a boolean vertex mask.
+Where: TypeAlias = Union[str, Sequence[str], ArrayLike]
+#: Components held: "x", "yz", "xyz", ... or a bool triple.
+Components: TypeAlias = Union[str, tuple[bool, bool, bool], Sequence[bool]]
+#: ``fixed=``: a where (all three components), ``{where: components}`` or ``[(where, components)]``.
+FixedSpec: TypeAlias = Union[Where, Mapping[str, Components], Sequence[tuple[Where, Components]]]
+#: One prescribed displacement: ``(ux, uy, uz)`` (m, None: free) or ``function(X (n, 3)) -> (n, 3)``.
+DisplacementValue: TypeAlias = Union[Sequence[Union[float, None]], Callable[[np.ndarray], ArrayLike]]
+#: ``displacement=``: ``{where: value}`` or ``[(where, value)]``.
+DisplacementSpec: TypeAlias = Union[Mapping[str, DisplacementValue],
+                                    Sequence[tuple[Where, DisplacementValue]]]
 
 #: How the components of a support may be written (for error messages).
 COMPONENT_FORMS = (

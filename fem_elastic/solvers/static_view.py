@@ -10,12 +10,23 @@ the load path's curves, :meth:`~StaticResultView.save` the run directory.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
 from ..errors import InvalidParameter
 from ..physics import result_view as _view
+
+if TYPE_CHECKING:  # for annotations only (pyvista and matplotlib are optional)
+    from typing import Unpack  # Python >= 3.11
+
+    import pyvista
+    from matplotlib.axes import Axes
+
+    from ..physics.multibody import AnyModel
+    from ..physics.pyvista_grid import FrameOptions
 
 __all__ = ["StaticResultView"]
 
@@ -79,7 +90,8 @@ class StaticResultView:
             )
         return model
 
-    def to_pyvista(self, point: int = -1, *, model=None):
+    def to_pyvista(self, point: int = -1, *,
+                   model: AnyModel | None = None) -> pyvista.UnstructuredGrid:
         """An equilibrium of the load path as a pyvista ``UnstructuredGrid`` (reference points).
 
         Point data ``displacement`` (m) and ``velocity`` (zero), cell data
@@ -110,8 +122,9 @@ class StaticResultView:
         p = self.path[point]
         return body_grid(model, p.x, time=float(p.load_factor))
 
-    def plot(self, point: int = -1, *, scalars: str = "von_mises", magnification="auto",
-             model=None, **kwargs):
+    def plot(self, point: int = -1, *, scalars: str = "von_mises",
+             magnification: Literal["auto"] | float = "auto", model: AnyModel | None = None,
+             **kwargs: Unpack[FrameOptions]) -> pyvista.Plotter:
         """Draw the equilibrium with pyvista over its undeformed outline.
 
         ``magnification="auto"`` magnifies a deflection under 5 % of the body's
@@ -129,7 +142,7 @@ class StaticResultView:
         kwargs.setdefault("title", f"static equilibrium, load factor {self.load_factor:.4g}")
         return plot_grid(grid, scalars=scalars, magnification=magnification, **kwargs)
 
-    def plot_history(self, quantity: str = "max_displacement", ax=None):
+    def plot_history(self, quantity: str = "max_displacement", ax: Axes | None = None) -> Axes:
         """A curve of the solve, with matplotlib.
 
         Parameters
@@ -176,7 +189,8 @@ class StaticResultView:
             "'residual'."
         )
 
-    def save(self, run_dir, *, model=None, overwrite: bool = False):
+    def save(self, run_dir: str | os.PathLike[str], *, model: AnyModel | None = None,
+             overwrite: bool = False) -> Path:
         """Write the load path as a run directory (the format ``fem-elastic run`` writes).
 
         Each converged point is a frame whose "time" is its load factor, and

@@ -386,8 +386,8 @@ def _dynamic(p) -> dict:
     beam = _beam(p)
     f_ref = beam.first_bending_frequency(p["density"])
     integrator = _integrator(p["integrator"])
-    f_h, phi = natural_frequencies(model, 1, mass="lumped", return_modes=True)
-    f_h, phi = float(f_h[0]), phi[:, 0]
+    freqs, phi = natural_frequencies(model, 1, mass="lumped", return_modes=True)
+    f_h, phi = float(freqs[0]), phi[:, 0]
     wz = _tip_weights(model, 2)
     u0 = phi * (-p["amplitude"] / float(wz @ phi))  # tip down by the amplitude
     state = State(model.X + u0, np.zeros(model.ndofs), 0.0)

@@ -21,11 +21,15 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ...errors import InvalidParameter
 from ..state import State
+
+if TYPE_CHECKING:  # for annotations only
+    from ...physics.multibody import AnyModel
 
 __all__ = ["Integrator", "StepStats", "check_dt", "check_state"]
 
@@ -169,7 +173,7 @@ class Integrator:
     explicit: bool = True
     order: int = 1
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.last_stats = StepStats()
 
     @property
@@ -180,7 +184,7 @@ class Integrator:
     def __repr__(self) -> str:
         return f"fe.{self.name}()"
 
-    def step(self, model, state: State, dt: float) -> State:  # pragma: no cover - abstract
+    def step(self, model: AnyModel, state: State, dt: float) -> State:  # pragma: no cover - abstract
         """Advance ``state`` by ``dt`` (s) and return the new State."""
         raise NotImplementedError
 

@@ -22,11 +22,12 @@ from __future__ import annotations
 import logging
 import math
 import time
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
 from ...errors import Diverged, InvalidParameter
-from ...solvers.linear_solvers import AutoSolver
+from ...solvers.linear_solvers import AutoSolver, as_linear_solver
 from ...materials import Corotated
 from ...physics.impulse_contact import reject_impulse_contact
 from ...solvers.newton import NewtonResult, _direction, newton_minimize
@@ -34,6 +35,10 @@ from ...solvers.static import _contact_max_step
 from ..state import State
 from .base import Integrator, StepStats, check_dt, check_state
 from .incremental import IncrementalPotential
+
+if TYPE_CHECKING:  # for annotations only
+    from ...physics.multibody import AnyModel
+    from ...solvers.solver_types import LinearSolver
 
 __all__ = ["ImplicitEuler", "LinearizedImplicitEuler"]
 
@@ -62,9 +67,12 @@ class _Implicit(Integrator):
 
     explicit = False
 
-    def __init__(self, mass="lumped", max_dt_cuts=4, linear_solver=None):
+    def __init__(self, mass: Literal["lumped", "consistent"] = "lumped", max_dt_cuts: int = 4,
+                 linear_solver: LinearSolver | None = None) -> None:
         super().__init__()
         self.mass = _check_mass(mass)
+        if isinstance(linear_solver, str):  # "auto", "direct", "amg" or "cholmod"
+            linear_solver = as_linear_solver(linear_solver)
         if linear_solver is not None and not callable(getattr(linear_solver, "solve", None)):
             raise InvalidParameter(
                 "linear_solver must be a solver object such as fe.DirectSolver(), fe.AMGSolver() "
@@ -80,7 +88,7 @@ class _Implicit(Integrator):
         self.max_dt_cuts = max_dt_cuts
         self.linear_solver = linear_solver
 
-    def step(self, model, state: State, dt: float) -> State:
+    def step(self, model: AnyModel, state: State, dt: float) -> State:
         h = check_dt(dt)
         check_state(model, state)
         reject_impulse_contact(model, f"fe.{self.name}")
@@ -165,8 +173,9 @@ class ImplicitEuler(_Implicit):
 
     order = 1
 
-    def __init__(self, rtol=1e-8, max_iter=30, mass="lumped", max_dt_cuts=4, project=True,
-                 linear_solver=None):
+    def __init__(self, rtol: float = 1e-8, max_iter: int = 30,
+                 mass: Literal["lumped", "consistent"] = "lumped", max_dt_cuts: int = 4,
+                 project: bool = True, linear_solver: LinearSolver | None = None) -> None:
         super().__init__(mass, max_dt_cuts, linear_solver)
         if not (isinstance(rtol, (int, float)) and 0 < rtol < 1):
             raise InvalidParameter(f"rtol must be in (0, 1), got {rtol!r}.")
@@ -248,7 +257,7 @@ class ImplicitEuler(_Implicit):
         v1 = self._velocity(state, x1, h)
         return self._finish(model, x1, v1, state.t + h), ""
 
-    def step_matrix(self, h, omega, zeta=0.0):
+    def step_matrix(self, h: float, omega: float, zeta: float = 0.0) -> np.ndarray:
         return np.linalg.inv(np.eye(2) - h * self._oscillator(omega, zeta))
 
 
@@ -291,7 +300,8 @@ class LinearizedImplicitEuler(_Implicit):
 
     order = 1
 
-    def __init__(self, mass="lumped", project=True, warping=True, linear_solver=None):
+    def __init__(self, mass: Literal["lumped", "consistent"] = "lumped", project: bool = True,
+                 warping: bool = True, linear_solver: LinearSolver | None = None) -> None:
         super().__init__(mass, 0, linear_solver)
         self.project, self.warping = bool(project), bool(warping)
 
@@ -332,7 +342,7 @@ class LinearizedImplicitEuler(_Implicit):
             return None, "the linear solve gave a non-finite update"
         return self._finish(model, x1, (x1 - state.x) / h, state.t + h), ""
 
-    def step_matrix(self, h, omega, zeta=0.0):
+    def step_matrix(self, h: float, omega: float, zeta: float = 0.0) -> np.ndarray:
         return np.linalg.inv(np.eye(2) - h * self._oscillator(omega, zeta))
 
 

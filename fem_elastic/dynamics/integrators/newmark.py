@@ -17,12 +17,19 @@ state (the first one, or one built by the user) it computes ``a`` from
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any, Literal
+
 import numpy as np
 import scipy.sparse.linalg as spla
 
 from ...errors import InvalidParameter
 from .implicit import ImplicitEuler
 from .incremental import IncrementalPotential
+
+if TYPE_CHECKING:  # for annotations only
+    from ...physics.multibody import AnyModel
+    from ...solvers.solver_types import LinearSolver
+    from ..state import State
 
 __all__ = ["Newmark"]
 
@@ -41,12 +48,16 @@ class Newmark(ImplicitEuler):
     """
 
     order = 2
+    _last: tuple[Any, Any]  # (State returned last, its acceleration a, m/s^2), or (None, None)
 
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
+    def __init__(self, rtol: float = 1e-8, max_iter: int = 30,
+                 mass: Literal["lumped", "consistent"] = "lumped", max_dt_cuts: int = 4,
+                 project: bool = True, linear_solver: LinearSolver | None = None) -> None:
+        super().__init__(rtol=rtol, max_iter=max_iter, mass=mass, max_dt_cuts=max_dt_cuts,
+                         project=project, linear_solver=linear_solver)
         self._last = (None, None)  # (state returned last, its acceleration)
 
-    def acceleration(self, model, state) -> np.ndarray:
+    def acceleration(self, model: AnyModel, state: State) -> np.ndarray:
         """``a`` (m/s^2) of ``state``: remembered from the last step, else from M a = f."""
         last_state, a = self._last
         if last_state is state:
@@ -64,7 +75,7 @@ class Newmark(ImplicitEuler):
             a[free] = spla.spsolve(M, f[free])
         return a
 
-    def checkpoint_state(self, state) -> dict:
+    def checkpoint_state(self, state: State) -> dict:
         """The remembered acceleration of ``state`` (m/s^2), if it is the state returned last.
 
         Recomputing it from ``M a = f`` would differ from the scheme's own
@@ -73,7 +84,7 @@ class Newmark(ImplicitEuler):
         last_state, a = self._last
         return {"acceleration": a.copy()} if last_state is state else {}
 
-    def restore_state(self, state, saved: dict) -> None:
+    def restore_state(self, state: State, saved: dict) -> None:
         """Remember ``saved["acceleration"]`` as the acceleration of ``state`` (if saved)."""
         unknown = set(saved) - {"acceleration"}
         if unknown:
@@ -118,6 +129,6 @@ class Newmark(ImplicitEuler):
             self._last = (out, a1)
         return out, why
 
-    def step_matrix(self, h, omega, zeta=0.0):
+    def step_matrix(self, h: float, omega: float, zeta: float = 0.0) -> np.ndarray:
         A = self._oscillator(omega, zeta)
         return np.linalg.solve(np.eye(2) - 0.5 * h * A, np.eye(2) + 0.5 * h * A)

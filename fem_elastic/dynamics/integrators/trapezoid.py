@@ -79,12 +79,17 @@ trapezoid rule second order.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
 from .base import restored_gradient
 from .implicit import ImplicitEuler
 from .incremental import IncrementalPotential
+
+if TYPE_CHECKING:  # for annotations only
+    from ...solvers.solver_types import LinearSolver
+    from ..state import State
 
 __all__ = ["Trapezoid", "TrapezoidPotential"]
 
@@ -181,16 +186,19 @@ class Trapezoid(ImplicitEuler):
     """
 
     order = 2
+    # (model or None: the next one, positions, dPi/dx there), all None when nothing is remembered
+    _force: tuple[Any, Any, Any]
 
-    def __init__(self, rtol=1e-8, max_iter=30, mass="lumped", max_dt_cuts=4, project=True,
-                 linear_solver=None):
+    def __init__(self, rtol: float = 1e-8, max_iter: int = 30,
+                 mass: Literal["lumped", "consistent"] = "lumped", max_dt_cuts: int = 4,
+                 project: bool = True, linear_solver: LinearSolver | None = None) -> None:
         super().__init__(rtol, max_iter, mass, max_dt_cuts, project, linear_solver)
         self._force = (None, None, None)  # (model or None: the next one, positions, dPi/dx there)
         self._g0 = None  # dPi/dx at the start of the step being taken
         self._G = None  # its potential
 
     # -- what it remembers -------------------------------------------------------------------
-    def checkpoint_state(self, state) -> dict:
+    def checkpoint_state(self, state: State) -> dict:
         """``gradient``: dPi/dx at ``state.x`` (N), if remembered from the step that ended there.
 
         Without it a resumed step evaluates the force itself: the same bits,
@@ -199,7 +207,7 @@ class Trapezoid(ImplicitEuler):
         _, at, g = self._force
         return {"gradient": g.copy()} if at is state.x else {}
 
-    def restore_state(self, state, saved: dict) -> None:
+    def restore_state(self, state: State, saved: dict) -> None:
         """Remember ``saved["gradient"]`` as dPi/dx at ``state.x`` (if saved)."""
         g = restored_gradient(self.name, state, saved, self._forget_force)
         if g is not None:
@@ -246,7 +254,7 @@ class Trapezoid(ImplicitEuler):
         finally:
             self._g0 = self._G = None
 
-    def step_matrix(self, h, omega, zeta=0.0):
+    def step_matrix(self, h: float, omega: float, zeta: float = 0.0) -> np.ndarray:
         """``(I - h/2 A)^-1 (I + h/2 A)`` on the modal oscillator (its step, for a constant C)."""
         A = self._oscillator(omega, zeta)
         return np.linalg.solve(np.eye(2) - 0.5 * h * A, np.eye(2) + 0.5 * h * A)

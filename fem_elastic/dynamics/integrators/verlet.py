@@ -44,10 +44,16 @@ more than a stable mode's swing ``1 / (1 - r^2)`` allows, ``r = h / dt_crit``.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from .base import restored_gradient
 from .explicit import _Explicit
+
+if TYPE_CHECKING:  # for annotations only
+    from ...physics.multibody import AnyModel
+    from ..state import State
 
 __all__ = ["VelocityVerlet"]
 
@@ -87,7 +93,7 @@ class VelocityVerlet(_Explicit):
     _gradient: tuple[np.ndarray | None, np.ndarray | None]
 
     # -- what it remembers: the force at the end of the step ---------------------------------
-    def step(self, model, state, dt):
+    def step(self, model: AnyModel, state: State, dt: float) -> State:
         """Advance ``state`` by ``dt`` (s): one step, or ``n`` sub-steps with ``substep``."""
         if not self.substep and self._model is not model:  # (sub-stepping keeps its own watch)
             if self._model is not None:  # a force of another model: forget it
@@ -95,7 +101,7 @@ class VelocityVerlet(_Explicit):
             self._model = model
         return super().step(model, state, dt)
 
-    def checkpoint_state(self, state) -> dict:
+    def checkpoint_state(self, state: State) -> dict:
         """What the next step reuses, for a checkpoint at ``state``.
 
         Returns
@@ -110,7 +116,7 @@ class VelocityVerlet(_Explicit):
         at, g = self._gradient
         return {"gradient": g.copy()} if at is state.x and g is not None else {}  # (g is set with at)
 
-    def restore_state(self, state, saved: dict) -> None:
+    def restore_state(self, state: State, saved: dict) -> None:
         """Take back what :meth:`checkpoint_state` returned (an empty dict starts afresh)."""
         if self.substep:
             return super().restore_state(state, saved)
@@ -167,7 +173,7 @@ class VelocityVerlet(_Explicit):
     def _swing(self, r) -> float:
         return 1.0 / (1.0 - r * r) if r < 1.0 else np.inf
 
-    def step_matrix(self, h, omega, zeta=0.0):
+    def step_matrix(self, h: float, omega: float, zeta: float = 0.0) -> np.ndarray:
         """One-step map of (q, v) on the modal oscillator; of one sub-step with ``substep``."""
         w2, c = omega * omega, 2.0 * zeta * omega
         vh = np.array([-0.5 * h * w2, 1.0 - 0.5 * h * c])  # rows: coefficients of (q, v)

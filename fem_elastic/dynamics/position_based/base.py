@@ -72,12 +72,16 @@ import logging
 import math
 import numbers
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ...errors import InvalidParameter
 from ..integrators.base import Integrator, StepStats, check_dt, check_state
 from ..state import State
+
+if TYPE_CHECKING:  # for annotations only
+    from ...physics.multibody import AnyModel
 
 __all__ = ["PositionBased", "METHODS", "check_one_body", "check_p1_body"]
 
@@ -202,7 +206,7 @@ class PositionBased(Integrator):
         raise NotImplementedError
 
     # -- the loop ---------------------------------------------------------------------------
-    def prepared(self, model) -> _Setup:
+    def prepared(self, model: AnyModel) -> _Setup:
         """The constraint sets and data of ``model`` (built on its first step, then reused)."""
         cached_model, setup = self._setup
         if cached_model is not model:
@@ -215,7 +219,7 @@ class PositionBased(Integrator):
                                                           f"{s.n_colors} colours" for s in setup.sets))
         return setup
 
-    def step(self, model, state: State, dt: float) -> State:
+    def step(self, model: AnyModel, state: State, dt: float) -> State:
         """Advance ``state`` by ``dt`` (s): ``substeps`` position-based steps (see the module notes)."""
         h = check_dt(dt)
         check_state(model, state)
@@ -265,7 +269,7 @@ class PositionBased(Integrator):
         v[dofs] = vc
         return p, v
 
-    def step_matrix(self, h, omega, zeta=0.0):  # pragma: no cover - documented absence
+    def step_matrix(self, h: float, omega: float, zeta: float = 0.0) -> np.ndarray:  # pragma: no cover - documented absence
         raise NotImplementedError(
             f"{self.name} has no closed-form one-step map: its step depends on the iteration "
             "count and the mesh, not on a modal oscillator alone."

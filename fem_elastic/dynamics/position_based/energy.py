@@ -98,7 +98,8 @@ class ConstraintNeoHookean(IsotropicMaterial):
 
     consistent_lame: bool = True
 
-    def __init__(self, E=None, nu=None, *, consistent_lame=True, **constants):
+    def __init__(self, E: float | None = None, nu: float | None = None, *,
+                 consistent_lame: bool = True, **constants: float) -> None:
         super().__init__(E, nu, **constants)
         if not isinstance(consistent_lame, (bool, np.bool_)):
             raise InvalidParameter(f"consistent_lame must be True or False, got {consistent_lame!r}.")
@@ -166,7 +167,7 @@ class ConstraintNeoHookean(IsotropicMaterial):
         _add_identity_term(C, np.full(F.shape[-1], self.mu_c))
         return C.reshape((3, 3, 3, 3) + batch)
 
-    def singular_value_hessian(self, s: np.ndarray):
+    def singular_value_hessian(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Eigensystem of the Hessian in the signed singular values ``s`` ``(3, N)``.
 
         With ``h = lam_c (J - gamma)``: ``H_ab = d_ab mu_c + lam_c (J/s_a)(J/s_b)

@@ -47,6 +47,8 @@ Examples
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 
 from ...errors import InvalidParameter
@@ -90,8 +92,9 @@ class PBD(PositionBased):
     _who = "fe.PBD"
 
     def __init__(self, stiffness: float = 1.0, iterations: int = 10, volume_stiffness: float = 1.0,
-                 method: str = "gauss_seidel", damping: float = 0.0, relaxation: float = 1.0,
-                 stiffness_per_iteration: bool = False, substeps: int = 1):
+                 method: Literal["gauss_seidel", "jacobi"] = "gauss_seidel", damping: float = 0.0,
+                 relaxation: float = 1.0, stiffness_per_iteration: bool = False,
+                 substeps: int = 1) -> None:
         super().__init__(iterations, method, damping, relaxation, substeps)
         self.stiffness = _number(stiffness, "stiffness", 0.0, 1.0, example=" (e.g. stiffness=0.5)")
         self.volume_stiffness = _number(volume_stiffness, "volume_stiffness", 0.0, 1.0)

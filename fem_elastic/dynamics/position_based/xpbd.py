@@ -96,6 +96,7 @@ Examples
 from __future__ import annotations
 
 import logging
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -105,6 +106,9 @@ from ...physics.springs import van_gelder_stiffness
 from .base import PositionBased, check_p1_body
 from .constraints import EdgeDistance, TetNeoHookean, TetVolume
 from .energy import ConstraintNeoHookean
+
+if TYPE_CHECKING:  # for annotations only
+    from ...physics.multibody import AnyModel
 
 __all__ = ["XPBD", "CONSTRAINTS", "HW_LIMIT", "max_frequency_estimate"]
 
@@ -174,9 +178,11 @@ class XPBD(PositionBased):
 
     _who = "fe.XPBD"
 
-    def __init__(self, iterations: int = 20, constraints: str = "neohookean",
-                 method: str = "gauss_seidel", damping: float = 0.0, relaxation: float = 1.0,
-                 consistent_lame: bool = True, substeps: int = 1):
+    def __init__(self, iterations: int = 20,
+                 constraints: Literal["neohookean", "edge_volume"] = "neohookean",
+                 method: Literal["gauss_seidel", "jacobi"] = "gauss_seidel", damping: float = 0.0,
+                 relaxation: float = 1.0, consistent_lame: bool = True,
+                 substeps: int = 1) -> None:
         super().__init__(iterations, method, damping, relaxation, substeps)
         if not isinstance(constraints, str) or constraints not in CONSTRAINTS:
             raise InvalidParameter(f"constraints must be one of {CONSTRAINTS}, got {constraints!r}.")
@@ -191,7 +197,7 @@ class XPBD(PositionBased):
                 f"method={self.method!r}, damping={self.damping:g}, relaxation={self.relaxation:g}, "
                 f"consistent_lame={self.consistent_lame}, substeps={self.substeps})")
 
-    def energy_material(self, model) -> ConstraintNeoHookean:
+    def energy_material(self, model: AnyModel) -> ConstraintNeoHookean:
         """The material whose FEM energy equals the ``"neohookean"`` constraint energy on ``model``.
 
         ``fe.ElasticBody(xpbd.energy_material(model))`` is the body to give
