@@ -141,7 +141,6 @@ def model_memory(n_tets: int, n_vertices: int, order: int = 1, solver: str = "au
         True: the model with its assembled tangent (:data:`BYTES_PER_TET`) and the
         ``solver``'s share; False: the model's own share alone (:data:`MODEL_BYTES_PER_TET`:
         mesh, space, mass, per-element data), no matrix and no solver.
-
     fused : bool
         True: the tangent is assembled by the fused numba kernels (:data:`FUSED_BYTES_PER_TET`,
         about a quarter of the numpy path's :data:`BYTES_PER_TET`).

@@ -18,10 +18,9 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import os
-import statistics
+import sys
 import time
-import tracemalloc
+from pathlib import Path
 
 import numpy as np
 
@@ -29,51 +28,8 @@ import fem_elastic as fe
 from fem_elastic.discretization import Discretization, fused
 from fem_elastic.physics.elastic_body import ElasticPotential
 
-
-def state(space: Discretization, compression: float) -> np.ndarray:
-    """Bent (tip deflection 0.1 m), shortened by ``compression`` along the beam, small nodal noise.
-
-    Bending alone compresses one half of the beam, where the Neo-Hookean tangent is
-    indefinite (its twist eigenvalues follow the compressive stress); 15 % compression
-    makes every element indefinite: the projection's worst case.
-    """
-    X = space.X.reshape(-1, 3)
-    x = X.copy()
-    x[:, 0] *= 1.0 - compression
-    x[:, 2] -= 0.1 * X[:, 0] ** 2
-    rng = np.random.default_rng(0)
-    return x.ravel() + 1e-4 * rng.standard_normal(space.ndofs)
-
-
-#: The clock of :func:`measure`: wall time, or with ``--clock process`` this process's CPU time
-#: (every kernel here runs on one thread), for a machine loaded by other processes.
-CLOCK = [time.perf_counter]
-
-
-def measure(fn, repeats: int) -> tuple[float, float]:
-    """Median time (s) of repeats calls, and the tracemalloc peak (MiB) of one more call."""
-    fn()  # warm-up: compile / load numba, build cached maps
-    clock = CLOCK[0]
-    times = []
-    for _ in range(repeats):
-        t0 = clock()
-        fn()
-        times.append(clock() - t0)
-    tracemalloc.start()
-    fn()
-    peak = tracemalloc.get_traced_memory()[1]
-    tracemalloc.stop()
-    return statistics.median(times), peak / 2**20
-
-
-def numpy_path(fn):
-    def run():
-        os.environ[fused.ENV] = "0"
-        try:
-            return fn()
-        finally:
-            os.environ.pop(fused.ENV)
-    return run
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_fused_tangent import measure, numpy_path, state  # noqa: E402  the same states and timing
 
 
 def main():
@@ -84,8 +40,8 @@ def main():
     parser.add_argument("--clock", choices=("wall", "process"), default="wall",
                         help="process: this process's CPU time (for a loaded machine)")
     args = parser.parse_args()
-    if args.clock == "process":
-        CLOCK[0] = time.process_time
+    # process: this process's CPU time (every kernel here runs on one thread), for a loaded machine
+    clock = time.process_time if args.clock == "process" else time.perf_counter
     if not fused.available():
         raise SystemExit("numba is not importable (or FEM_ELASTIC_NUMBA=0): nothing to compare")
     repeats = max(5, args.repeats)
@@ -109,15 +65,16 @@ def main():
         if compression:
             works = {k: works[k] for k in ("gradient", "tangent projected")}
         for work, f in works.items():
-            t_f, m_f = measure(f, repeats)
-            t_n, m_n = measure(numpy_path(f), repeats)
+            t_f, m_f = measure(f, repeats, clock)
+            t_n, m_n = measure(numpy_path(f), repeats, clock)
             a, b = f(), numpy_path(f)()
             a, b = (np.atleast_1d(getattr(v, "data", v)) for v in (a, b))
             err = np.abs(a - b).max() / np.abs(b).max()
             print(f"{label:<16} {cls.__name__:<18} {work:<17} {t_f:9.4f} "
                   f"{t_n:9.4f} {t_f / t_n:7.3f} {m_f:10.1f} {m_n:10.1f} {err:13.2e}", flush=True)
     from fem_elastic.discretization import _fused_p2_kernels as p2
-    off = p2.element_offsets(space.pattern, fused.kernels_for(fe.StVK(1e6, 0.45), space).geo.nodes)
+    from fem_elastic.discretization import _fused_tangent_kernels as tk
+    off = tk.element_offsets(space.pattern, p2.geometry(space).nodes)
     print(f"fused path, once per pattern: (ne, 10, 10) {off.dtype} offset map "
           f"{off.nbytes / 2**20:.1f} MiB (the numpy path's scatter, int64: "
           f"{space.pattern.scatter.nbytes / 2**20:.1f} MiB, is built for the numpy path)")

@@ -5,7 +5,7 @@ cells, 153,600 P1 tets), ``ElasticPotential.hessian(x, project)`` on both paths 
 and axially compressed state, and prints per row the medians of ``--repeats`` (>= 5) runs,
 the ratio fused / numpy, and the peak memory traced by :mod:`tracemalloc` during one call
 of each path (after a warm-up call, so the cached sparsity pattern and the fused path's
-``(ne, 12, 12)`` index map, whose size is printed on its own, are not counted).
+``(ne, 4, 4)`` block-offset map, whose size is printed on its own, are not counted).
 
 Usage::
 
@@ -43,14 +43,15 @@ def state(space: Discretization, compression: float) -> np.ndarray:
     return x.ravel() + 1e-4 * rng.standard_normal(space.ndofs)
 
 
-def measure(fn, repeats: int) -> tuple[float, float]:
-    """Median wall time (s) of repeats calls, and the tracemalloc peak (MiB) of one more call."""
+def measure(fn, repeats: int, clock=time.perf_counter) -> tuple[float, float]:
+    """Median time (s, by ``clock``: wall time by default) of repeats calls, and the tracemalloc
+    peak (MiB) of one more call."""
     fn()  # warm-up: compile / load numba, build cached maps
     times = []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0 = clock()
         fn()
-        times.append(time.perf_counter() - t0)
+        times.append(clock() - t0)
     tracemalloc.start()
     fn()
     peak = tracemalloc.get_traced_memory()[1]
@@ -102,17 +103,10 @@ def main():
             print(f"{label:<16} {cls.__name__:<18} {'projected' if project else 'exact':<9} {t_f:9.4f} "
                   f"{t_n:9.4f} {t_f / t_n:7.3f} {m_f:10.1f} {m_n:10.1f} {err:17.2e}")
     from fem_elastic.discretization import _fused_tangent_kernels as tk
-    off = tk.element_offsets(space.pattern, tk_nodes(space))
+    off = tk.element_offsets(space.pattern, fused._geometry(space).nodes)
     print(f"fused path, once per pattern: (ne, 4, 4) {off.dtype} block-offset map "
           f"{off.nbytes / 2**20:.1f} MiB (the numpy path's scatter, int64, built on its first use: "
           f"{space.pattern.scatter.nbytes / 2**20:.1f} MiB)")
-
-
-def tk_nodes(space):
-    """The (ne, 4) vertex indices the fused P1 kernels use."""
-    from fem_elastic.discretization import fused
-
-    return fused._geometry(space).nodes
 
 
 if __name__ == "__main__":

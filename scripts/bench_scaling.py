@@ -62,11 +62,11 @@ def main(argv=None):
     import numpy as np
     import scipy
 
-    import fem_elastic as fe
+    from fem_elastic.solvers.linear_solvers import as_linear_solver
     from fem_elastic.study import scaling
 
     sizes = args.sizes or (scaling.QUICK_SIZES if args.quick else scaling.FULL_SIZES)
-    solver = {"amg": fe.AMGSolver, "auto": fe.AutoSolver, "direct": fe.DirectSolver}[args.solver]()
+    solver = as_linear_solver(args.solver)
     try:
         import numba
 
@@ -90,8 +90,9 @@ def main(argv=None):
           f"measured in {time.perf_counter() - t0:.0f} s\n")
     print(result.summary())
     print()
+    exponents = result.exponents
     for op in result.operations:
-        p = result.exponents[op]
+        p = exponents[op]
         spread = [f"{s.min() * 1e3:.3g}-{s.max() * 1e3:.3g}" for s in result.samples[op]]
         print(f"  {op:14s} p = {p:.2f}   t(153,600 tets) from the fit {result.predict(op, 153600) * 1e3:9.1f} ms"
               f"   samples min-max ms per size: {', '.join(spread)}")

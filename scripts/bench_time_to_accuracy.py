@@ -52,6 +52,7 @@ import fem_elastic as fe
 from fem_elastic.physics.analytic import RectangularCantilever
 from fem_elastic.physics.loads import traction_load
 from fem_elastic.solvers import linear_solvers
+from fem_elastic.solvers.cholmod import have_cholmod, shared_solver
 
 L, B, H = 1.0, 0.05, 0.05  # m
 E, NU, RHO = 2.1e11, 0.3, 7850.0  # Pa, -, kg/m^3
@@ -77,30 +78,19 @@ def tip_weights(model) -> np.ndarray:
     return f / f.sum()
 
 
-def make_solver(name: str):
-    """A new linear solver per pipeline (none keeps a factor or an analysis from the last one)."""
-    if name == "cholmod":
-        from fem_elastic.solvers.cholmod import CholmodSolver
-
-        return CholmodSolver()
-    return fe.AutoSolver() if name == "auto" else fe.DirectSolver()
-
-
 def have_solver(name: str) -> bool:
-    if name != "cholmod":
-        return True
-    try:
-        from fem_elastic.solvers.cholmod import have_cholmod
-    except ImportError:
-        return False
-    return have_cholmod()
+    """Whether the solver of that name can be made here (CHOLMOD needs scikit-sparse)."""
+    return name != "cholmod" or have_cholmod()
 
 
 def pipeline(order: int, cells, solver: str = "direct") -> tuple[dict, float, int]:
     """One run from nothing to the tip deflection: (seconds per phase, relative error, DOFs)."""
-    # DirectSolver keeps the last LU and reuses it for an identical matrix: a repeated
-    # pipeline would get it for free, so it starts from an empty cache, as a new process does
+    # DirectSolver keeps the last LU and AutoSolver this thread's CHOLMOD factor, each reused
+    # for an identical matrix: a repeated pipeline would get it for free, so it starts from
+    # empty caches, as a new process does (a named solver is made anew for each pipeline)
     linear_solvers._FACTORS.__init__()
+    if have_cholmod():
+        shared_solver().release()
     t = {}
     t0 = time.perf_counter()
     mesh = fe.beam_mesh(L, B, H, cells=cells)
@@ -110,7 +100,7 @@ def pipeline(order: int, cells, solver: str = "direct") -> tuple[dict, float, in
     t2 = time.perf_counter()
     model.space.pattern  # noqa: B018 (cached on the space: built here, reused by the solve)
     t3 = time.perf_counter()
-    res = fe.solve_static(model, linear_solver=make_solver(solver), stability=False)
+    res = fe.solve_static(model, linear_solver=solver, stability=False)
     t4 = time.perf_counter()
     t["mesh"], t["model"], t["pattern"] = t1 - t0, t2 - t1, t3 - t2
     t["assembly"] = res.seconds["linearize"]

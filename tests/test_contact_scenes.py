@@ -17,18 +17,28 @@ pytest.importorskip("ipctk", reason="IPC contact needs the [contact] extra (ipct
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def test_two_body_drop_never_intersects_and_the_ball_ends_on_the_block():
-    run = load_scene(ROOT / "scenes" / "two_bodies.toml").build()[0]
-    model = run.model
-    checked = []
+def _run_checking_every_step(scene: str) -> tuple[fe.Model | fe.MultiBody, fe.Trajectory, list[int]]:
+    """Run ``scenes/<scene>`` in full, asserting no intersection after every accepted step.
 
-    def no_intersection(step, state):
+    Returns the model, the trajectory and the number of active contact pairs after each step.
+    """
+    run = load_scene(ROOT / "scenes" / scene).build()[0]
+    model = run.model
+    active = []
+
+    def no_intersection(step: int, state: fe.State) -> None:
         assert not model.contact.has_intersections(state.x), f"intersecting at t = {state.t:.3f} s"
-        checked.append(step)
+        active.append(model.contact.diagnostics(state.x)["active_contacts"])
 
     traj = fe.simulate(model, run.integrator, run.dt, steps=run.steps, state=run.state,
                        callback=no_intersection)
-    assert len(checked) == run.steps
+    assert len(active) == run.steps  # the check ran after every step
+    return model, traj, active
+
+
+def test_two_body_drop_never_intersects_and_the_ball_ends_on_the_block():
+    model, traj, active = _run_checking_every_step("two_bodies.toml")
+    assert max(active) > 0  # the ball did come within dhat of the block: contact was tested
     assert traj.summary()["contact_intersecting_at_end"] is False
     ball = model.body_slice("ball")  # the ball's DOFs (P1: 3 per vertex, first body)
     z = traj.final_state.x[ball][2::3]
@@ -40,14 +50,5 @@ def test_two_body_drop_never_intersects_and_the_ball_ends_on_the_block():
 
 def test_self_contact_fold_never_intersects():
     """The beam folded onto itself: the driven end meets the clamped part, every step clean."""
-    run = load_scene(ROOT / "scenes" / "self_contact.toml").build()[0]
-    model = run.model
-    active = []
-
-    def no_intersection(step, state):
-        assert not model.contact.has_intersections(state.x), f"intersecting at t = {state.t:.3f} s"
-        active.append(model.contact.diagnostics(state.x)["active_contacts"])
-
-    fe.simulate(model, run.integrator, run.dt, steps=run.steps, state=run.state, callback=no_intersection)
-    assert len(active) == run.steps
+    _, _, active = _run_checking_every_step("self_contact.toml")
     assert max(active) > 0  # the fold did bring the surfaces within dhat: contact was tested

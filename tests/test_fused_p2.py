@@ -10,64 +10,30 @@ Tests that need numba are skipped without it.
 
 import numpy as np
 import pytest
-import skfem
+from test_fused import E, NU, REGISTERED, ids, needs_numba
+from test_fused import space as fused_space
+from test_fused_tangent import assert_newton_unchanged, assert_projection_exercised_and_psd, numpy_path
+from test_fused_tangent import states as deformed_states
 
 import fem_elastic as fe
 from fem_elastic.discretization import Discretization, fused
 from fem_elastic.physics.elastic_body import ElasticPotential
 
-E, NU = 1.0e6, 0.4
-REGISTERED = [fe.LinearElastic, fe.StVK, fe.NeoHookean, fe.StableNeoHookean]
 # Both paths evaluate the same closed forms with another order of operations (the fused
 # one rebuilds dN from the reference gradients and d xi / d x, and sums the element
 # matrices in another order): they differ by a few eps of the largest entry, far below
 # 1e-12 relative.
 RTOL = 1e-12
 
-needs_numba = pytest.mark.skipif(
-    not fused.available(), reason="numba not installed (or FEM_ELASTIC_NUMBA=0)"
-)
-
-
-def ids(cls):
-    return cls.__name__
-
-
-_SPACE = []
-
 
 def space() -> Discretization:
     """A 0.3 x 0.1 x 0.1 m box of 2 x 1 x 1 cells (12 P2 tets, 375 DOFs), vertices moved by <= 10 %."""
-    if not _SPACE:
-        mesh = fe.beam_mesh(0.3, 0.1, 0.1, cells=(2, 1, 1))
-        rng = np.random.default_rng(7)
-        mesh = skfem.MeshTet(mesh.p + rng.uniform(-0.005, 0.005, mesh.p.shape), mesh.t)
-        fe.validate_mesh(mesh)
-        _SPACE.append(Discretization(mesh, 2))
-    return _SPACE[0]
+    return fused_space(2, (2, 1, 1))
 
 
 def states():
     """A stretched-sheared-rotated state and a compressed one (indefinite tangents), J > 0."""
-    s = space()
-    rng = np.random.default_rng(11)
-    Xp = s.X.reshape(-1, 3)
-    out = []
-    for A in (np.eye(3) + 0.3 * rng.standard_normal((3, 3)),
-              np.diag([0.55, 0.7, 0.8]) + 0.05 * rng.standard_normal((3, 3))):
-        x = (Xp @ A.T).ravel() + 0.002 * rng.standard_normal(s.ndofs)
-        F = s.deformation_gradient(x - s.X)
-        assert np.linalg.det(np.moveaxis(F, (0, 1), (-2, -1))).min() > 0.1  # admissible, with a margin
-        out.append(x)
-    return out
-
-
-def numpy_path(monkeypatch, pot, x, project):
-    """Energy, gradient and tangent of the numpy path."""
-    with monkeypatch.context() as m:
-        m.setenv(fused.ENV, "0")
-        assert pot._fused() is None
-        return pot.energy(x), pot.gradient(x), pot.hessian(x, project=project)
+    return deformed_states(space(), noise=0.002)
 
 
 @needs_numba
@@ -102,15 +68,7 @@ def test_fused_p2_matches_the_numpy_path(material_cls, project, monkeypatch):
 @needs_numba
 def test_p2_projection_is_exercised_and_psd():
     """The compressed state has indefinite Neo-Hookean tangents: the projection changes them."""
-    pot = ElasticPotential(fe.NeoHookean(E, NU), space())
-    x = states()[1]
-    exact = pot.hessian(x).toarray()
-    proj = pot.hessian(x, project=True).toarray()
-    # precondition of the comparison test above: projection did something there
-    assert np.abs(proj - exact).max() > 1e-3 * np.abs(exact).max()
-    # a sum of PSD point contributions is PSD; eigenvalue round-off ~ eps * largest eigenvalue
-    w = np.linalg.eigvalsh(0.5 * (proj + proj.T))
-    assert w.min() >= -1e-12 * w.max()
+    assert_projection_exercised_and_psd(ElasticPotential(fe.NeoHookean(E, NU), space()), states()[1])
 
 
 @needs_numba
@@ -172,20 +130,4 @@ def test_gradient_into_out_and_bad_out():
 @pytest.mark.parametrize("material_cls", [fe.NeoHookean, fe.LinearElastic], ids=ids)
 def test_p2_newton_result_unchanged(material_cls, monkeypatch):
     """A P2 cantilever under a tip load solved by Newton on both paths: the same equilibrium."""
-    def solve():
-        model = fe.Model(fe.beam_mesh(0.3, 0.1, 0.1, cells=(3, 1, 1)), 1000.0,
-                         body=fe.ElasticBody(material_cls(E, NU), order=2), fixed="left",
-                         traction={"right": (0.0, 0.0, -2.0e4)})
-        return fe.solve_static(model)
-
-    r = solve()
-    with monkeypatch.context() as m:
-        m.setenv(fused.ENV, "0")
-        r_np = solve()
-    u, u_np = r.displacement, r_np.displacement
-    assert r.converged and r_np.converged
-    assert r.iterations == r_np.iterations  # round-off apart tangents: the same Newton path
-    assert np.abs(u).max() > 1e-3  # precondition: a visible deflection (m)
-    # Newton stops at rtol 1e-8 on the residual; both paths converge to the same root and
-    # the remaining difference is that tolerance times the compliance, well below 1e-7 relative
-    assert np.abs(u - u_np).max() <= 1e-7 * np.abs(u).max()
+    assert_newton_unchanged(material_cls, 2, (3, 1, 1), monkeypatch)

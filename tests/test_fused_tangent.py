@@ -9,62 +9,79 @@ exact and projected, on a small distorted mesh; be the derivative of the fused g
 
 import numpy as np
 import pytest
-import skfem
+from test_fused import E, NU, REGISTERED, ids, needs_numba, space  # space(): 72 distorted P1 tets
 
 import fem_elastic as fe
 from fem_elastic.discretization import Discretization, fused
 from fem_elastic.physics.elastic_body import ElasticPotential
 
-E, NU = 1.0e6, 0.4
-REGISTERED = [fe.LinearElastic, fe.StVK, fe.NeoHookean, fe.StableNeoHookean]
 # Both paths evaluate the same closed forms in a different order of operations (and the
 # fused one sums the element matrices in another order): they differ by round-off, a few
 # eps times the largest entry, far below 1e-12 relative to the matrix's norm.
 RTOL = 1e-12
 
-needs_numba = pytest.mark.skipif(
-    not fused.available(), reason="numba not installed (or FEM_ELASTIC_NUMBA=0)"
-)
 
+def states(s: Discretization | None = None, noise: float = 0.003) -> list[np.ndarray]:
+    """A stretched-sheared-rotated state and a compressed one (indefinite tangents), J > 0.
 
-def ids(cls):
-    return cls.__name__
-
-
-_SPACE = []
-
-
-def space() -> Discretization:
-    """A 0.3 x 0.1 x 0.1 m box of 3 x 2 x 2 cells (72 tets), vertices moved by <= 10 %."""
-    if not _SPACE:
-        mesh = fe.beam_mesh(0.3, 0.1, 0.1, cells=(3, 2, 2))
-        rng = np.random.default_rng(7)
-        mesh = skfem.MeshTet(mesh.p + rng.uniform(-0.005, 0.005, mesh.p.shape), mesh.t)
-        fe.validate_mesh(mesh)
-        _SPACE.append(Discretization(mesh, 1))
-    return _SPACE[0]
-
-
-def states():
-    """A stretched-sheared-rotated state and a compressed one (indefinite tangents), J > 0."""
-    s = space()
+    On ``s`` (default: the P1 ``space()``), plus nodal noise of ``noise`` m (tests/test_fused_p2.py
+    takes these states on its P2 space).
+    """
+    s = space() if s is None else s
     rng = np.random.default_rng(11)
     Xp = s.X.reshape(-1, 3)
     out = []
     for A in (np.eye(3) + 0.3 * rng.standard_normal((3, 3)),
               np.diag([0.55, 0.7, 0.8]) + 0.05 * rng.standard_normal((3, 3))):
-        x = (Xp @ A.T).ravel() + 0.003 * rng.standard_normal(s.ndofs)
+        x = (Xp @ A.T).ravel() + noise * rng.standard_normal(s.ndofs)
         F = s.deformation_gradient(x - s.X)
         assert np.linalg.det(np.moveaxis(F, (0, 1), (-2, -1))).min() > 0.1  # admissible (J > 0 with a margin)
         out.append(x)
     return out
 
 
-def numpy_hessian(monkeypatch, pot, x, project):
+def numpy_path(monkeypatch, pot, x, project):
+    """Energy, gradient and tangent of the numpy path (``FEM_ELASTIC_NUMBA=0``)."""
     with monkeypatch.context() as m:
         m.setenv(fused.ENV, "0")
         assert pot._fused() is None
-        return pot.hessian(x, project=project)
+        return pot.energy(x), pot.gradient(x), pot.hessian(x, project=project)
+
+
+def numpy_hessian(monkeypatch, pot, x, project):
+    return numpy_path(monkeypatch, pot, x, project)[2]
+
+
+def assert_projection_exercised_and_psd(pot, x):
+    """The projected tangent differs from the exact one at x, and is PSD to round-off."""
+    exact = pot.hessian(x).toarray()
+    proj = pot.hessian(x, project=True).toarray()
+    # precondition of the comparison tests: projection did something there
+    assert np.abs(proj - exact).max() > 1e-3 * np.abs(exact).max()
+    # a sum of PSD element (point) contributions is PSD; eigenvalue round-off ~ eps * largest eigenvalue
+    w = np.linalg.eigvalsh(0.5 * (proj + proj.T))
+    assert w.min() >= -1e-12 * w.max()
+
+
+def assert_newton_unchanged(material_cls, order, cells, monkeypatch):
+    """A 0.3 m cantilever of ``cells`` under a tip load, solved by Newton on both paths: the same equilibrium."""
+    def solve():
+        model = fe.Model(fe.beam_mesh(0.3, 0.1, 0.1, cells=cells), 1000.0,
+                         body=fe.ElasticBody(material_cls(E, NU), order=order), fixed="left",
+                         traction={"right": (0.0, 0.0, -2.0e4)})
+        return fe.solve_static(model)
+
+    r = solve()
+    with monkeypatch.context() as m:
+        m.setenv(fused.ENV, "0")
+        r_np = solve()
+    u, u_np = r.displacement, r_np.displacement
+    assert r.converged and r_np.converged
+    assert r.iterations == r_np.iterations  # round-off apart tangents: the same Newton path
+    assert np.abs(u).max() > 1e-3  # precondition: a visibly nonlinear deflection (m)
+    # Newton stops at rtol 1e-8 on the residual; both paths converge to the same root and
+    # the remaining difference is that tolerance times the compliance, well below 1e-7 relative
+    assert np.abs(u - u_np).max() <= 1e-7 * np.abs(u).max()
 
 
 @needs_numba
@@ -82,17 +99,9 @@ def test_fused_tangent_matches_the_numpy_path(material_cls, project, monkeypatch
 
 
 @needs_numba
-def test_projection_is_exercised_and_psd(monkeypatch):
+def test_projection_is_exercised_and_psd():
     """The compressed state has indefinite Neo-Hookean tangents: the projection changes them."""
-    pot = ElasticPotential(fe.NeoHookean(E, NU), space())
-    x = states()[1]
-    exact = pot.hessian(x).toarray()
-    proj = pot.hessian(x, project=True).toarray()
-    # precondition of the comparison test above: projection did something there
-    assert np.abs(proj - exact).max() > 1e-3 * np.abs(exact).max()
-    # a sum of PSD element matrices is PSD; eigenvalue round-off ~ eps * largest eigenvalue
-    w = np.linalg.eigvalsh(0.5 * (proj + proj.T))
-    assert w.min() >= -1e-12 * w.max()
+    assert_projection_exercised_and_psd(ElasticPotential(fe.NeoHookean(E, NU), space()), states()[1])
 
 
 @needs_numba
@@ -141,24 +150,8 @@ def test_inverted_neohookean_element_gives_nan_as_the_numpy_path(monkeypatch):
 @needs_numba
 @pytest.mark.parametrize("material_cls", [fe.NeoHookean, fe.StVK], ids=ids)
 def test_newton_result_unchanged(material_cls, monkeypatch):
-    """A cantilever under a tip load solved by Newton on both paths: the same equilibrium."""
-    def solve():
-        model = fe.Model(fe.beam_mesh(0.3, 0.1, 0.1, cells=(3, 2, 2)), 1000.0,
-                         body=fe.ElasticBody(material_cls(E, NU), order=1), fixed="left",
-                         traction={"right": (0.0, 0.0, -2.0e4)})
-        return fe.solve_static(model)
-
-    r = solve()
-    with monkeypatch.context() as m:
-        m.setenv(fused.ENV, "0")
-        r_np = solve()
-    u, u_np = r.displacement, r_np.displacement
-    assert r.converged and r_np.converged
-    assert r.iterations == r_np.iterations  # round-off apart tangents: the same Newton path
-    assert np.abs(u).max() > 1e-3  # precondition: a visibly nonlinear deflection (m)
-    # Newton stops at rtol 1e-8 on the residual; both paths converge to the same root and
-    # the remaining difference is that tolerance times the compliance, well below 1e-7 relative
-    assert np.abs(u - u_np).max() <= 1e-7 * np.abs(u).max()
+    """A P1 cantilever under a tip load solved by Newton on both paths: the same equilibrium."""
+    assert_newton_unchanged(material_cls, 1, (3, 2, 2), monkeypatch)
 
 
 def test_hessian_without_numba_is_the_numpy_assembly(monkeypatch):

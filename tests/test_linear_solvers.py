@@ -25,7 +25,9 @@ def test_direct_and_amg_agree(system):
     d = fe.DirectSolver().solve(A, b)
     a = fe.AMGSolver(rtol=1e-10).solve(A, b, near_null=B)
     assert d.residual < 1e-10  # LU: residual at round-off times the condition growth
-    assert a.residual <= 1e-9  # CG stops at rtol=1e-10 in its preconditioned norm; allow 10x
+    # CG stops when its updated residual is below rtol = 1e-10 of ||b|| (the 2-norm); the true
+    # residual reported here drifts from it by round-off (measured 5.8e-11): 10x covers the drift
+    assert a.residual <= 1e-9
     assert a.iterations > 0 and a.method == "amg-cg"
     # ||x - x*|| / ||x*|| <= cond(A) * residual; cond ~ 1e5 here, so ~1e-5 at worst
     np.testing.assert_allclose(a.x, d.x, rtol=0, atol=1e-5 * np.abs(d.x).max())

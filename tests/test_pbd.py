@@ -8,6 +8,7 @@ import pytest
 import fem_elastic as fe
 from fem_elastic.app.scene import parse_scene
 from fem_elastic.dynamics.position_based import EdgeDistance
+from small_scene import small_scene
 
 G = (0.0, 0.0, -9.81)
 
@@ -94,9 +95,10 @@ def test_friction_decelerates_a_sliding_block_at_mu_g():
         vx.append((model.lumped_mass * s.v)[0::3].sum() / model.total_mass)
     decel = (vx[5] - vx[25]) / (20 * dt)
     # once the block rests, the normal impulse the projections apply per step is its weight times dt,
-    # so the deceleration is mu g to round-off plus the elastic settling (measured -2.4e-5 relative);
-    # 2 % is a margin for the settling of other sweep orders, not a physical bound
-    assert decel == pytest.approx(mu * 9.81, rel=0.02)
+    # so the deceleration is mu g to round-off plus the elastic settling: measured -2.41e-5 relative
+    # with these settings on the numba and the numpy path alike (-2.48e-5 at 100 iterations); 1e-3
+    # is 40x that. An under-converged solve settles more (5 sweeps at stiffness 0.8: -1.2e-3)
+    assert decel == pytest.approx(mu * 9.81, rel=1e-3)
 
 
 def test_restitution_bounces_the_contact_vertices():
@@ -220,28 +222,8 @@ def test_substeps_take_the_step_in_smaller_steps():
 
 
 # -- scenes and checkpoints -------------------------------------------------------------------------------
-SCENE = """\
-[mesh]
-kind = "beam"
-cells = [4, 1, 1]
-[body]
-material = "stable_neo_hookean"
-E = 1e5
-nu = 0.3
-density = 1000.0
-[boundary]
-fixed = ["left"]
-[loads]
-gravity = [0.0, 0.0, -9.81]
-[integrator]
-type = "pbd"
-stiffness = 0.8
-iterations = 7
-method = "jacobi"
-[time]
-dt = 0.01
-duration = 0.03
-"""
+SCENE = small_scene("pbd", material="stable_neo_hookean", cells=(4, 1, 1), duration=0.03, integrator="pbd",
+                    integrator_options='stiffness = 0.8\niterations = 7\nmethod = "jacobi"')
 
 
 def test_scene_files_build_pbd_and_xpbd_with_their_options():

@@ -15,6 +15,7 @@ import pytest
 import fem_elastic as fe
 from fem_elastic.app.scene import parse_scene
 from fem_elastic.dynamics.checkpoint import run_fingerprint
+from small_scene import small_scene
 
 E, NU, RHO, DT = 1e5, 0.3, 1000.0, 0.01
 
@@ -203,27 +204,8 @@ def test_a_damped_cantilever_settles_on_the_static_answer():
 
 
 def test_a_scene_file_builds_and_runs_it():
-    text = """\
-[mesh]
-kind = "beam"
-cells = [4, 1, 1]
-[body]
-material = "corotated"
-E = 1e5
-nu = 0.3
-density = 1000.0
-[boundary]
-fixed = ["left"]
-[loads]
-gravity = [0.0, 0.0, -9.81]
-[integrator]
-type = "projective_dynamics"
-iterations = 7
-mass = "consistent"
-[time]
-dt = 0.01
-duration = 0.05
-"""
+    text = small_scene("pd", material="corotated", cells=(4, 1, 1), duration=0.05,
+                       integrator="projective_dynamics", integrator_options='iterations = 7\nmass = "consistent"')
     run = parse_scene(text).build()[0]
     pd = run.integrator
     assert isinstance(pd, fe.ProjectiveDynamics) and (pd.iterations, pd.mass, pd.tol) == (7, "consistent", 0.0)

@@ -13,12 +13,16 @@ SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 MESHES = SCRIPTS.parent / "meshes"
 
 
-def test_bench_assembly_quick_prints_its_ratios():
-    r = subprocess.run(
-        [sys.executable, str(SCRIPTS / "bench_assembly.py"), "--quick", "--no-direct", "--repeats", "1"],
-        capture_output=True, text=True, timeout=600,
-    )
+def _run_script(name: str, *args: str) -> subprocess.CompletedProcess:
+    """Run ``scripts/<name>`` as a user does; it must exit 0 (its stderr is the message if not)."""
+    r = subprocess.run([sys.executable, str(SCRIPTS / name), *args], capture_output=True, text=True,
+                       timeout=600)
     assert r.returncode == 0, r.stderr
+    return r
+
+
+def test_bench_assembly_quick_prints_its_ratios():
+    r = _run_script("bench_assembly.py", "--quick", "--no-direct", "--repeats", "1")
     for line in ("scikit-fem forms / ours", "projection overhead", "assembly share"):
         assert line in r.stdout
     # the benchmark checks its own two assemblies against each other; both to round-off
@@ -40,12 +44,7 @@ def test_shipped_meshes_are_what_make_meshes_builds():
 
 
 def test_bench_step_quick_prints_its_figures():
-    r = subprocess.run(
-        [sys.executable, str(SCRIPTS / "bench_step.py"), "--quick", "--repeats", "1",
-         "--implicit-steps", "1"],
-        capture_output=True, text=True, timeout=600,
-    )
-    assert r.returncode == 0, r.stderr
+    r = _run_script("bench_step.py", "--quick", "--repeats", "1", "--implicit-steps", "1")
     assert "numpy gradient" in r.stdout
     assert "ImplicitEuler, dt = 1/60 s" in r.stdout and "shares of the step time" in r.stdout
     if "fused gradient" in r.stdout:  # numba installed: the fused path agrees with numpy
@@ -55,11 +54,7 @@ def test_bench_step_quick_prints_its_figures():
 
 
 def test_bench_static_stability_prints_its_ratio():
-    r = subprocess.run(
-        [sys.executable, str(SCRIPTS / "bench_static_stability.py"), "--tets", "2000", "--repeats", "1"],
-        capture_output=True, text=True, timeout=600,
-    )
-    assert r.returncode == 0, r.stderr
+    r = _run_script("bench_static_stability.py", "--tets", "2000", "--repeats", "1")
     median = r.stdout.split("median:")[1]
     assert "ratio" in median and "goal <= 0.3" in median
     # the clamped beam under its tip load is a stable equilibrium: the check must say so
@@ -67,12 +62,7 @@ def test_bench_static_stability_prints_its_ratio():
 
 
 def test_bench_newton_amg_quick_prints_setups_per_step():
-    r = subprocess.run(
-        [sys.executable, str(SCRIPTS / "bench_newton_amg.py"), "--quick", "--repeats", "1",
-         "--steps", "1"],
-        capture_output=True, text=True, timeout=600,
-    )
-    assert r.returncode == 0, r.stderr
+    r = _run_script("bench_newton_amg.py", "--quick", "--repeats", "1", "--steps", "1")
     after = r.stdout.split(" after:")[1]
     # one AMG hierarchy per step with reuse (the quick beam needs no rebuild)
     assert "AMG setups 1.00" in after.splitlines()[0]

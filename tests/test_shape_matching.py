@@ -16,6 +16,7 @@ import pytest
 import fem_elastic as fe
 from fem_elastic.app.scene import SceneError, parse_scene
 from fem_elastic.dynamics.shape_matching import grid_clusters
+from small_scene import small_scene
 
 DT = 0.01
 
@@ -224,29 +225,8 @@ def test_a_point_cloud_needs_no_mesh():
 
 
 def test_a_scene_file_builds_it_and_names_its_modes():
-    text = """\
-[mesh]
-kind = "beam"
-cells = [6, 1, 1]
-[body]
-material = "corotated"
-E = 1e5
-nu = 0.3
-density = 1000.0
-[boundary]
-fixed = ["left"]
-[loads]
-gravity = [0.0, 0.0, -9.81]
-[integrator]
-type = "shape_matching"
-mode = "quadratic"
-beta = 0.3
-clusters = 3
-damping = 0.1
-[time]
-dt = 0.01
-duration = 0.05
-"""
+    text = small_scene("sm", material="corotated", cells=(6, 1, 1), duration=0.05, integrator="shape_matching",
+                       integrator_options='mode = "quadratic"\nbeta = 0.3\nclusters = 3\ndamping = 0.1')
     run = parse_scene(text).build()[0]
     sm = run.integrator
     assert isinstance(sm, fe.ShapeMatching)

@@ -197,18 +197,18 @@ def _run_scene_command(scene, out_dir, out, **options) -> int:
         outcomes, rendered = run_scene(scene, out_dir, **options)  # refuses --out "" by its text
         out_dir = Path(out_dir)
     except SceneInterrupted as stop:
-        return _interrupted(stop, Path(out_dir), scene, time.perf_counter() - t0)
-    return _finish_scene_command(scene, out_dir, outcomes, rendered, t0, out)
+        return _interrupted(stop)
+    return _finish_scene_command(out_dir, outcomes, rendered, t0, out)
 
 
-def _finish_scene_command(scene, out_dir, outcomes, rendered, t0, out) -> int:
+def _finish_scene_command(out_dir, outcomes, rendered, t0, out) -> int:
     # OUT/summary.json: run_scene wrote it while it held the directory's lock
     _print_outcomes(out, outcomes, rendered, out_dir)
     out(f"total {time.perf_counter() - t0:.1f} s")
     return 0 if all(o.status == "completed" for o in outcomes) else _EXIT_FAILED
 
 
-def _interrupted(stop, out_dir, scene, seconds) -> int:
+def _interrupted(stop) -> int:
     """Ctrl-C: say what stopped (run_scene wrote the scene's summary, "interrupted"), exit 130."""
     sys.stderr.write(f"fem-elastic: {stop.outcome.name}: {stop.outcome.message}\n")
     return _EXIT_INTERRUPTED
@@ -278,7 +278,7 @@ def _demo(args) -> int:
         outcomes, rendered = run_scene(scene, args.out, progress=not args.quiet, render=not args.no_render,
                                        overwrite=args.overwrite)
     except SceneInterrupted as stop:
-        return _interrupted(stop, out_dir, scene, time.perf_counter() - t0)
+        return _interrupted(stop)
     seconds = time.perf_counter() - t0  # OUT/summary.json: written by run_scene under its lock
 
     # Tip deflection at the end of the run against the static answer of beam theory under

@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
@@ -539,12 +539,12 @@ class Scene:
         # 1e-9: duration / dt in floating point may land a hair above an integer
         return max(1, math.ceil(ratio - 1e-9))
 
-    def _boundary_check(self, mesh, what: str = "the mesh"):
+    def _boundary_check(self, mesh: MeshTet, what: str = "the mesh") -> Callable[[str, tuple], None]:
         """``check(name, path)``: a SceneError at ``path`` when ``mesh`` (``what``) has no boundary ``name``."""
         names = sorted(mesh.boundaries or {})
         known = ", ".join(f'"{n}"' for n in names) or "none (fix vertices by index instead)"
 
-        def check(name, path):
+        def check(name: str, path: tuple) -> None:
             if name not in names:
                 near = closest(name, names)
                 hint = f' — did you mean "{near}"?' if near else "."

@@ -45,8 +45,8 @@ import numba
 import numpy as np
 
 from . import _fused_kernels as _k
-from ._fused_tangent_kernels import block_offsets, project_psd, tangent  # block_offsets: any node count
-from .fused import _REGISTRY, _frozen
+from ._fused_tangent_kernels import element_offsets, project_psd, tangent  # offsets: any node count
+from .fused import _REGISTRY, _frozen, _out_array, _readonly
 from .space import Discretization
 
 _jit = numba.njit(cache=True, error_model="numpy", nogil=True)
@@ -231,8 +231,6 @@ class _P2Geometry:
 
 #: Discretization -> its P2 geometry; dropped with the Discretization.
 _geometry_cache: "weakref.WeakKeyDictionary[Discretization, _P2Geometry]" = weakref.WeakKeyDictionary()
-#: SparsityPattern -> its (ne, 10, 10) block-offset map; dropped with the pattern.
-_offset_cache: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 def geometry(space: Discretization) -> _P2Geometry:
@@ -241,33 +239,6 @@ def geometry(space: Discretization) -> _P2Geometry:
     if geo is None:
         geo = _geometry_cache[space] = _P2Geometry(space)
     return geo
-
-
-def element_offsets(pattern, nodes: np.ndarray) -> np.ndarray:
-    """``(ne, 10, 10)`` int32 offset of each element node block within its CSR rows (cached).
-
-    Parameters
-    ----------
-    pattern : SparsityPattern
-        The pattern of the space whose element nodes are ``nodes``.
-    nodes : numpy.ndarray
-        ``(ne, 10)`` node indices.
-
-    Returns
-    -------
-    numpy.ndarray
-        Read-only, C-contiguous.
-    """
-    off = _offset_cache.get(pattern)
-    if off is None:
-        off = np.empty(nodes.shape + (nodes.shape[1],), dtype=np.int32)
-        block_offsets(nodes, pattern.indptr, pattern.indices, off)
-        if off.min() < 0:
-            raise ValueError("the sparsity pattern does not hold every element's node pairs: "
-                             "it was built for another discretization")
-        off.setflags(write=False)
-        _offset_cache[pattern] = off
-    return off
 
 
 class FusedP2:
@@ -292,13 +263,7 @@ class FusedP2:
 
     def _x(self, x) -> np.ndarray:
         """x as a read-only, C-contiguous float view (one numba specialisation, as FusedP1._x)."""
-        x = np.ascontiguousarray(x, dtype=float)
-        if x.shape != (self.geo.ndofs,):
-            raise ValueError(f"x must have shape ({self.geo.ndofs},), got {x.shape}")
-        if x.flags.writeable:
-            x = x.view()
-            x.setflags(write=False)
-        return x
+        return _readonly(x, self.geo.ndofs, "x")
 
     def energy(self, x: np.ndarray) -> float:
         """Elastic energy (J); +inf if any quadrature point is inadmissible."""
@@ -308,10 +273,7 @@ class FusedP2:
     def gradient(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """dE/dx (N), ``(ndofs,)``: into ``out`` if given (C-contiguous float64), else a new array."""
         g = self.geo
-        if out is None:
-            out = np.empty(g.ndofs)
-        elif out.shape != (g.ndofs,) or out.dtype != np.float64 or not out.flags.c_contiguous:
-            raise ValueError(f"out must be a C-contiguous float64 array of shape ({g.ndofs},)")
+        out = _out_array(out, g.ndofs)
         gradient_p2(self._x(x), g.X, g.nodes, g.Dm_inv, g.dx, g.G, self.kind, self.prm, out)
         return out
 

@@ -430,22 +430,23 @@ def block_offsets(nodes, indptr, indices, off):
 
 
 # the map into the CSR data ------------------------------------------------------------
-#: SparsityPattern -> its (ne, 4, 4) block-offset map; dropped with the pattern.
+#: SparsityPattern -> its (ne, nl, nl) block-offset map; dropped with the pattern.
 _offset_cache: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 def element_offsets(pattern, nodes: np.ndarray) -> np.ndarray:
-    """``(ne, 4, 4)`` int32 offset of each element's node blocks within their CSR rows (cached).
+    """``(ne, nl, nl)`` int32 offset of each element's node blocks within their CSR rows (cached).
 
     Built once per pattern by :func:`block_offsets` (an element's entry
     ``(3 a + i, 3 b + k)`` sits at ``indptr[3 nodes[e, a] + i] + off[e, a, b] + k``).
+    Serves the P1 (``nl = 4``) and the P2 (``nl = 10``, :mod:`._fused_p2_kernels`) tangents.
 
     Parameters
     ----------
     pattern : SparsityPattern
-        Of the P1 space whose element vertices are ``nodes``.
+        Of the space whose element nodes are ``nodes``.
     nodes : numpy.ndarray
-        ``(ne, 4)`` vertex indices.
+        ``(ne, nl)`` scalar node indices (the vertices for P1).
 
     Returns
     -------

@@ -285,7 +285,6 @@ class _PartitionedP1:
         self.nodes = _frozen(nodes[self.order], np.int64)
         self.Dm_inv = _frozen(geo.Dm_inv[self.order], float)
         self.V = _frozen(geo.V[self.order], float)
-        self.n_seam = int(seam.sum())
 
 
 def _frozen(a: np.ndarray, dtype) -> np.ndarray:
@@ -329,13 +328,7 @@ class FusedP1:
 
     def _x(self, x) -> np.ndarray:
         """x as a read-only, C-contiguous float view (a copy only if it is not one already)."""
-        x = np.ascontiguousarray(x, dtype=float)
-        if x.shape != (self.geo.ndofs,):
-            raise ValueError(f"x must have shape ({self.geo.ndofs},), got {x.shape}")
-        if x.flags.writeable:
-            x = x.view()
-            x.setflags(write=False)
-        return x
+        return _readonly(x, self.geo.ndofs, "x")
 
     def energy(self, x: np.ndarray) -> float:
         """Elastic energy (J); +inf if any element is inadmissible."""
@@ -357,10 +350,7 @@ class FusedP1:
         sum their element contributions in another order).
         """
         g = self.geo
-        if out is None:
-            out = np.empty(g.ndofs)
-        elif out.shape != (g.ndofs,) or out.dtype != np.float64 or not out.flags.c_contiguous:
-            raise ValueError(f"out must be a C-contiguous float64 array of shape ({g.ndofs},)")
+        out = _out_array(out, g.ndofs)
         n_threads = _threads(g.nodes.shape[0])
         if n_threads > 1:
             c = g.parts(n_threads)
@@ -436,6 +426,15 @@ def _readonly(a, n: int, name: str) -> np.ndarray:
         a = a.view()
         a.setflags(write=False)
     return a
+
+
+def _out_array(out: np.ndarray | None, n: int) -> np.ndarray:
+    """``out`` checked as a kernel's result array (C-contiguous float64 ``(n,)``), or a new one."""
+    if out is None:
+        return np.empty(n)
+    if out.shape != (n,) or out.dtype != np.float64 or not out.flags.c_contiguous:
+        raise ValueError(f"out must be a C-contiguous float64 array of shape ({n},)")
+    return out
 
 
 def warped_apply(warped, x: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -75,10 +75,10 @@ from ..physics.elastic_body import ElasticPotential
 from ..solvers.cholmod import spd_factor
 from .integrators.base import Integrator, StepStats, check_dt, check_state
 from .position_based.base import check_one_body
+from .state import State
 
 if TYPE_CHECKING:  # for annotations only
     from ..physics.multibody import AnyModel
-from .state import State
 
 __all__ = ["ProjectiveDynamics"]
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import InvalidParameter
 from ..physics import result_view as _view
+from ..solvers.static_view import save_sections
 
 if TYPE_CHECKING:  # for annotations only (pyvista and matplotlib are optional)
     from typing import Unpack  # Python >= 3.11
@@ -321,6 +322,7 @@ class Trajectory:
             f"or a per-step statistic {sorted(self.step_stats)}."
         )
 
+    @save_sections
     def save(self, run_dir: str | os.PathLike[str], *, model: AnyModel | None = None,
              overwrite: bool = False) -> Path:
         """Write the trajectory as a run directory, the format ``fem-elastic run`` writes.
@@ -329,26 +331,5 @@ class Trajectory:
         ``displacement``, ``velocity``, stresses; P2 edge nodes as in
         :meth:`to_pyvista`) and ``summary.json``; read it back with
         :func:`fe.read_series`, render it with ``fe.render``.
-
-        Parameters
-        ----------
-        run_dir : path-like
-            A new or empty directory, or one a result was saved in before (it is
-            replaced). One that holds other files is refused
-            (:class:`fe.InvalidParameter`) unless ``overwrite``.
-        model : Model, optional
-            The model, where the result does not know it.
-        overwrite : bool
-            Write into a directory holding other files all the same: files with a
-            run's names (``series.pvd``, ``summary.json``, ``frames/frame_*.vtu``) are
-            replaced, the others left alone.
-
-        The directory is locked while it is written: a second writer gets
-        :class:`fe.OutputInUse`.
-
-        Returns
-        -------
-        pathlib.Path
-            ``run_dir``.
         """
         return _view.save_result("trajectory", self, run_dir, self._need_model(model), overwrite=overwrite)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal, overload
 
 import numpy as np
 
@@ -31,7 +31,18 @@ if TYPE_CHECKING:  # for annotations only (the model imports this module)
 __all__ = ["CollisionSurface", "collision_surface", "surface_triangles"]
 
 
-def surface_triangles(tets: np.ndarray, points: np.ndarray, return_tets: bool = False):
+@overload
+def surface_triangles(tets: np.ndarray, points: np.ndarray,
+                      return_tets: Literal[False] = False) -> np.ndarray: ...
+
+
+@overload
+def surface_triangles(tets: np.ndarray, points: np.ndarray,
+                      return_tets: Literal[True]) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+def surface_triangles(tets: np.ndarray, points: np.ndarray,
+                      return_tets: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Boundary triangles of a tet mesh, counter-clockwise seen from outside.
 
     A face lies on the boundary when exactly one tet has it; its normal
@@ -43,7 +54,6 @@ def surface_triangles(tets: np.ndarray, points: np.ndarray, return_tets: bool = 
         ``(m, 4)`` vertex indices.
     points : numpy.ndarray
         ``(n, 3)`` reference vertex positions (m), for the orientation.
-
     return_tets : bool
         Also return the tet each triangle belongs to (the renderer colours a
         face by its tet's cell data).

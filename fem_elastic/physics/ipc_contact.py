@@ -343,9 +343,7 @@ class BoundIPCContact(Potential):
         ipctk = _ipctk()
         V = self._V(x)
         c = self._collisions_at(V)
-        # an IPCContact pickled before ``projection`` existed has IPC's clamp
-        projection = getattr(self.spec, "projection", "clamp")
-        method = getattr(ipctk.PSDProjectionMethod, _PROJECTIONS[projection] if project else "NONE")
+        method = getattr(ipctk.PSDProjectionMethod, _PROJECTIONS[self.spec.projection] if project else "NONE")
         n = 3 * self.surface.n_vertices
         H = sp.csc_matrix((n, n))
         if not c.empty():
@@ -366,9 +364,9 @@ class BoundIPCContact(Potential):
         one restores quadratic convergence; the clamped one converges only
         linearly there (a factor of about 0.3 per iteration measured on the
         two-cube drop of scripts/bench_ipc.py at 2592 tets: 27 Newton
-        iterations in its first step against 13 with the exact tangent). Newton returns to the projection as soon as the exact
-        direction is not a descent direction or is cut by the CCD or the line
-        search. With ``kappa="auto"`` the stiffness is set here at the first
+        iterations in its first step against 13 with the exact tangent).
+        Newton returns to the projection as soon as the exact direction is
+        not a descent direction or is cut by the CCD or the line search. With ``kappa="auto"`` the stiffness is set here at the first
         linearization with active contacts (see the module notes); it does not
         change inside a solve.
         """

@@ -109,16 +109,7 @@ def pivoting_lu(A):
     so here a pivot is taken off the diagonal when it is below 0.1 of its column's
     largest entry. Raises :class:`fe.SingularMatrix` if ``A`` is singular.
     """
-    import scipy.sparse.linalg as spla
-
-    try:
-        return spla.splu(sp.csc_matrix(A), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
-                         options=dict(SymmetricMode=True))
-    except RuntimeError as exc:  # SuperLU: "Factor is exactly singular"
-        raise SingularMatrix(
-            f"the matrix is singular ({exc}); some motion costs no energy: check that the body "
-            "is fixed (fixed=...) and that no element is degenerate."
-        ) from None
+    return superlu(A, diag_pivot_thresh=0.1, what="the matrix")
 
 
 def _as_csc(A):
@@ -210,15 +201,17 @@ class CholmodSolver:
         fallback = self.fallback if fallback is None else fallback
         C = _as_csc(A)
         setups = 0
-        if not (self._same_pattern(C) and self._same_values(C)):
+        same_pattern = self._same_pattern(C)  # each O(nnz) comparison once per call
+        same_values = same_pattern and self._same_values(C)
+        if not same_values:
             self._unpublish()  # the factor is about to change (or be replaced): nobody may use it
-        if not self._same_pattern(C):
+        if not same_pattern:
             self._factor = self._cholmod.analyze(C, mode="supernodal")
             self._pattern = (C.shape, C.indptr.copy(), C.indices.copy())
             self._values = self._kind = self._solver = None
             self.analyses += 1
             setups += 1
-        elif self._same_values(C) and (self._kind == "cholmod" or fallback):
+        elif same_values and (self._kind == "cholmod" or fallback):
             return self._solver, 0
         try:
             self._factor.cholesky_inplace(C)
@@ -242,7 +235,7 @@ class CholmodSolver:
         if self._publish and (self._shared or C.shape[0] <= _CACHE_MAX_DOFS):
             # the last factor made: solve_static's stability check preconditions LOBPCG with it
             # (withdrawn by _unpublish before this factor is refactorised in place)
-            _FACTORS.put_elsewhere_kept(C.shape, _FactorSolve(self._factor, C.shape))
+            _FACTORS.put_elsewhere_kept(C.shape, _FactorSolve(self._factor))
         return self._solver, setups + 1
 
     def _unpublish(self) -> None:
@@ -271,9 +264,9 @@ class CholmodSolver:
         if not np.all(np.isfinite(x)):
             raise SingularMatrix("the Cholesky solve produced non-finite values: the matrix is singular.")
         method = "cholmod" if self._kind == "cholmod" else "direct"
-        res = _relative_residual(A, x, b) if b.ndim == 1 else float(
-            np.linalg.norm(b - A @ x) / max(float(np.linalg.norm(b)), 1e-300))
-        return LinearSolve(x, method, 0, res, time.perf_counter() - t0, setups=setups)
+        # (n, k) right-hand sides: the Frobenius norms, relative
+        return LinearSolve(x, method, 0, _relative_residual(A, x, b), time.perf_counter() - t0,
+                           setups=setups)
 
     def strict(self) -> "_StrictCholmod":
         """This solver (same factor and counters), raising :class:`fe.LinearSolverFailed` on a
@@ -302,11 +295,10 @@ class _StrictCholmod:
 class _FactorSolve:
     """``solve(b)`` by a CHOLMOD factor (SuperLU's factors have the same method)."""
 
-    __slots__ = ("factor", "shape")
+    __slots__ = ("factor",)
 
-    def __init__(self, factor, shape=None):
+    def __init__(self, factor: Callable[[np.ndarray], np.ndarray]) -> None:
         self.factor = factor
-        self.shape = shape
 
     def solve(self, b):
         return self.factor(b)

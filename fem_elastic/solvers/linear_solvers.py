@@ -97,10 +97,6 @@ class _FactorCache:
         self.key = None
         self.lu = None
 
-    @staticmethod
-    def _arrays(A):
-        return (A.shape, A.indptr, A.indices, A.data)
-
     def get(self, A):
         if self.key is None or self.key[0] != A.shape:
             return None
@@ -125,21 +121,26 @@ _FACTORS = _FactorCache()
 _CACHE_MAX_DOFS = 50_000  # larger factors hold too much memory to keep around
 
 
-def superlu(A):
+def superlu(A: sp.spmatrix, diag_pivot_thresh: float = 0.0,
+            what: str = "the stiffness matrix") -> spla.SuperLU:
     """SuperLU factor of a symmetric matrix ``A`` (symmetric ordering, diagonal pivots preferred).
 
-    Raises :class:`SingularMatrix` if ``A`` is singular.
+    ``diag_pivot_thresh`` is SuperLU's: 0 takes the diagonal pivots as they
+    come (right for a positive definite matrix), 0.1 pivots off the diagonal
+    where it is below 0.1 of its column's largest entry
+    (:func:`~fem_elastic.solvers.cholmod.pivoting_lu`). ``what`` names ``A``
+    in the error. Raises :class:`SingularMatrix` if ``A`` is singular.
     """
     try:
         return spla.splu(
             sp.csc_matrix(A),
             permc_spec="MMD_AT_PLUS_A",
-            diag_pivot_thresh=0.0,
+            diag_pivot_thresh=diag_pivot_thresh,
             options=dict(SymmetricMode=True),
         )
     except RuntimeError as exc:  # SuperLU: "Factor is exactly singular"
         raise SingularMatrix(
-            f"the stiffness matrix is singular ({exc}); some motion costs no energy: "
+            f"{what} is singular ({exc}); some motion costs no energy: "
             "check that the body is fixed (fixed=...) and that no element is degenerate."
         ) from None
 

@@ -28,8 +28,8 @@ Linear solves (issue 19). Above the direct solver's size (``AutoSolver``,
 or an ``AMGSolver``) one smoothed-aggregation hierarchy, built at the first
 solve of the call (one implicit step, or one load step), preconditions CG
 for every later tangent of the call (:class:`ReusedAMG`; it is rebuilt when
-CG on it needs more than twice the iterations of the solve right after the
-setup, or fails). Exact or projected is decided inside that CG, without a
+CG on it needs more than 1.5 times the iterations a fresh hierarchy would take,
+extrapolated from the solve right after the setup, or fails). Exact or projected is decided inside that CG, without a
 solve of its own: the exact tangent's CG stops at its first search direction
 ``p`` with ``p . H p <= 0``. That curvature is the exact cheap indicator of
 indefiniteness along the Krylov space the solve explores (a Lanczos-type

@@ -398,7 +398,7 @@ class StaticOptions(TypedDict, total=False):
 
     rtol: float
     max_iter: int
-    linear_solver: LinearSolver | None
+    linear_solver: LinearSolver | str | None
     project: bool
     initial_load_step: float
     min_load_step: float
@@ -418,7 +418,7 @@ def solve_static(
     *,
     rtol: float = 1e-8,
     max_iter: int = 30,
-    linear_solver: LinearSolver | None = None,
+    linear_solver: LinearSolver | str | None = None,
     project: bool = True,
     initial_load_step: float = 1.0,
     min_load_step: float = 1.0 / 1024,

@@ -11,8 +11,9 @@ the load path's curves, :meth:`~StaticResultView.save` the run directory.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 import numpy as np
 
@@ -28,7 +29,46 @@ if TYPE_CHECKING:  # for annotations only (pyvista and matplotlib are optional)
     from ..physics.multibody import AnyModel
     from ..physics.pyvista_grid import FrameOptions
 
-__all__ = ["StaticResultView"]
+__all__ = ["StaticResultView", "save_sections"]
+
+#: The numpydoc sections of a result's ``save`` after its summary: :meth:`StaticResultView.save`
+#: and :meth:`fem_elastic.Trajectory.save` share them, as they share the writer
+#: (:func:`fem_elastic.physics.result_view.save_result`).
+_SAVE_SECTIONS = """
+        Parameters
+        ----------
+        run_dir : path-like
+            A new or empty directory, or one a result was saved in before (it is
+            replaced). One that holds other files is refused
+            (:class:`fe.InvalidParameter`) unless ``overwrite``.
+        model : Model, optional
+            The model, where the result does not know it.
+        overwrite : bool
+            Write into a directory holding other files all the same: files with a
+            run's names (``series.pvd``, ``summary.json``, ``frames/frame_*.vtu``) are
+            replaced, the others left alone.
+
+        Returns
+        -------
+        pathlib.Path
+            ``run_dir``.
+
+        Raises
+        ------
+        InvalidParameter
+            ``run_dir`` holds other files, without ``overwrite``.
+        OutputInUse
+            Another writer holds the directory: it is locked while it is written.
+        """
+
+_Method = TypeVar("_Method", bound=Callable[..., Any])
+
+
+def save_sections(method: _Method) -> _Method:
+    """Decorator of a result's ``save``: its docstring (the summary) followed by the shared
+    Parameters, Returns and Raises sections."""
+    method.__doc__ = (method.__doc__ or "").rstrip() + "\n" + _SAVE_SECTIONS
+    return method
 
 
 class StaticResultView:
@@ -189,6 +229,7 @@ class StaticResultView:
             "'residual'."
         )
 
+    @save_sections
     def save(self, run_dir: str | os.PathLike[str], *, model: AnyModel | None = None,
              overwrite: bool = False) -> Path:
         """Write the load path as a run directory (the format ``fem-elastic run`` writes).
@@ -196,26 +237,5 @@ class StaticResultView:
         Each converged point is a frame whose "time" is its load factor, and
         ``summary.json`` holds the physical result (largest displacement,
         reactions per support, stability).
-
-        Parameters
-        ----------
-        run_dir : path-like
-            A new or empty directory, or one a result was saved in before (it is
-            replaced). One that holds other files is refused
-            (:class:`fe.InvalidParameter`) unless ``overwrite``.
-        model : Model, optional
-            The model, where the result does not know it.
-        overwrite : bool
-            Write into a directory holding other files all the same: files with a
-            run's names (``series.pvd``, ``summary.json``, ``frames/frame_*.vtu``) are
-            replaced, the others left alone.
-
-        The directory is locked while it is written: a second writer gets
-        :class:`fe.OutputInUse`.
-
-        Returns
-        -------
-        pathlib.Path
-            ``run_dir``.
         """
         return _view.save_result("static", self, run_dir, self._need_model(model), overwrite=overwrite)

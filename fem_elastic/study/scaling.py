@@ -41,7 +41,7 @@ from ..physics.elastic_body import ElasticBody
 from ..physics.model import Model
 from ..solvers.linear_solvers import AMGSolver, DirectSolver
 
-__all__ = ["FULL_SIZES", "OPERATIONS", "QUICK_SIZES", "ScalingResult", "beam_cells",
+__all__ = ["FULL_SIZES", "OPERATIONS", "QUICK_SIZES", "ScalingResult", "beam_cells", "bent_state",
            "fit_power_law", "measure_scaling"]
 
 logger = logging.getLogger(__name__)
@@ -229,11 +229,13 @@ class ScalingResult:
         return ax
 
 
-def _bent_state(X: np.ndarray, length: float = 1.0, height: float = 0.1) -> np.ndarray:
-    """Positions of a cantilever bending shape (tip deflection 10 % of the length).
+def bent_state(X: np.ndarray, length: float = 1.0, height: float = 0.1) -> np.ndarray:
+    """Positions (m) of a cantilever bending shape of the beam at ``X``, tip deflection 10 % of
+    the length (m), the beam's height (m) along z from 0.
 
     Euler-Bernoulli kinematics, plane sections normal to the axis: axial strains up to
-    about 1.5 %, all det F > 0, the lower half in compression.
+    about 1.5 %, all det F > 0, the lower half in compression. The state the assembly and
+    the explicit step are timed at here and in the benchmark scripts (``scripts/bench_step.py``).
     """
     zc, w_tip = height / 2.0, 0.1 * length
     Xp = X.reshape(-1, 3)
@@ -255,7 +257,7 @@ def _check_count(value, name: str, low: int) -> int:
 def _operations(model, operations, linear_solver):
     """({operation: callable} on ``model``, the ImplicitEuler or None); each call does the
     whole operation once."""
-    x_bent = _bent_state(model.X)
+    x_bent = bent_state(model.X)
     ops = {}
     implicit = None
     if "assembly" in operations:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -79,7 +80,8 @@ def check_dt(dt) -> float:
     return float(dt)
 
 
-def restored_gradient(name: str, state, saved: dict, forget, written_by: str = "another integrator"):
+def restored_gradient(name: str, state: State, saved: dict, forget: Callable[[], None],
+                      written_by: str = "another integrator") -> np.ndarray | None:
     """The ``dPi/dx`` at ``state.x`` that a checkpoint saved as ``saved["gradient"]``, or None.
 
     For the schemes that remember the force at the end of a step (velocity

@@ -146,6 +146,9 @@ class _Work:
         self.finite_state = None
         #: whether impulse contacts change x1, v1 after the update (then it cannot vouch for them)
         self.responds = _has_impulse_response(model)
+        #: (potential, factor) of the loads and contacts, which :meth:`gradient` adds to the body's
+        #: fused force: listed at its first use (a single-body Model's path only)
+        self.other_terms: list | None = None
         if model.driven:
             self.free = self.held = self.x_held = self.v_held = None
         else:
@@ -168,7 +171,9 @@ class _Work:
             out[:] = model.gradient(x)
             return out
         kernels.gradient(x, out=out)
-        for term, c in model._scaled_terms(1.0)[1:]:
+        if self.other_terms is None:
+            self.other_terms = model._scaled_terms(1.0)[1:]
+        for term, c in self.other_terms:
             out += c * term.gradient(x)
         return out
 
@@ -658,8 +663,9 @@ class SymplecticEuler(_Explicit):
 
     def _advance(self, model, state, h, t1, stats):
         w = self._work(model)
-        if w.free is not None and not w.responds and _update_kernel() is not None:
-            return self._advance_fused(model, state, h, t1, stats, w)
+        update = _update_kernel() if w.free is not None and not w.responds else None
+        if update is not None:
+            return self._advance_fused(model, state, h, t1, stats, w, update)
         free = self._free(model, state.t)
         # in the cached buffers: the new State's own copies of x1 and v1 are the step's only arrays
         a = self._acceleration(model, state.x, state.v, free, stats, out=w.buffer)
@@ -669,9 +675,10 @@ class SymplecticEuler(_Explicit):
         x1 += state.x  # x + h v1
         return self._finish(model, x1, v1, t1)
 
-    def _advance_fused(self, model, state, h, t1, stats, w):
-        """:meth:`_advance` in one numba pass after the force (the same bits), into the new State's
-        own arrays (no copies); for models with no driven boundary and no impulse contact."""
+    def _advance_fused(self, model, state, h, t1, stats, w, update):
+        """:meth:`_advance` in one numba pass (``update``, :func:`_update_kernel`'s) after the force
+        (the same bits), into the new State's own arrays (no copies); for models with no driven
+        boundary and no impulse contact."""
         at, g = self._gradient
         if at is state.x:  # computed to judge the step that ended at state.x
             f = g
@@ -684,8 +691,7 @@ class SymplecticEuler(_Explicit):
             f = np.negative(f, out=w.buffer)
             f += fd
         x1, v1 = np.empty(model.ndofs), np.empty(model.ndofs)
-        finite = _update_kernel()(f, negate, w.inv_mass, h, state.x, state.v, w.held, w.x_held,
-                                  w.v_held, x1, v1)
+        finite = update(f, negate, w.inv_mass, h, state.x, state.v, w.held, w.x_held, w.v_held, x1, v1)
         out = State._adopt(x1, v1, t1)
         w.finite_state = out if finite else None
         return out

@@ -68,16 +68,11 @@ class _Implicit(Integrator):
     explicit = False
 
     def __init__(self, mass: Literal["lumped", "consistent"] = "lumped", max_dt_cuts: int = 4,
-                 linear_solver: LinearSolver | None = None) -> None:
+                 linear_solver: LinearSolver | str | None = None) -> None:
         super().__init__()
         self.mass = _check_mass(mass)
-        if isinstance(linear_solver, str):  # "auto", "direct", "amg" or "cholmod"
-            linear_solver = as_linear_solver(linear_solver)
-        if linear_solver is not None and not callable(getattr(linear_solver, "solve", None)):
-            raise InvalidParameter(
-                "linear_solver must be a solver object such as fe.DirectSolver(), fe.AMGSolver() "
-                f"or fe.AutoSolver(), got {linear_solver!r}."
-            )
+        if linear_solver is not None:  # a name ("auto", "direct", "amg", "cholmod") or an object
+            linear_solver = as_linear_solver(linear_solver)  # with solve(); InvalidParameter else
         if (isinstance(max_dt_cuts, bool) or not isinstance(max_dt_cuts, int)
                 or not 0 <= max_dt_cuts <= MAX_DT_CUTS):
             # bounded: k halvings can cost 2^k sub-steps for one step
@@ -156,8 +151,9 @@ class ImplicitEuler(_Implicit):
         up to this many times; then :class:`fe.Diverged` is raised.
     project : bool
         PSD-projected Hessian away from the solution (see :mod:`fem_elastic.solvers.newton`).
-    linear_solver : object, optional
-        ``fe.DirectSolver()``, ``fe.AMGSolver()``, default ``fe.AutoSolver()``.
+    linear_solver : object or str, optional
+        ``fe.DirectSolver()``, ``fe.AMGSolver()``, or a name (``"direct"``, ``"amg"``,
+        ``"auto"``, ``"cholmod"``); default ``fe.AutoSolver()``.
 
     Examples
     --------
@@ -175,7 +171,7 @@ class ImplicitEuler(_Implicit):
 
     def __init__(self, rtol: float = 1e-8, max_iter: int = 30,
                  mass: Literal["lumped", "consistent"] = "lumped", max_dt_cuts: int = 4,
-                 project: bool = True, linear_solver: LinearSolver | None = None) -> None:
+                 project: bool = True, linear_solver: LinearSolver | str | None = None) -> None:
         super().__init__(mass, max_dt_cuts, linear_solver)
         if not (isinstance(rtol, (int, float)) and 0 < rtol < 1):
             raise InvalidParameter(f"rtol must be in (0, 1), got {rtol!r}.")
@@ -301,7 +297,7 @@ class LinearizedImplicitEuler(_Implicit):
     order = 1
 
     def __init__(self, mass: Literal["lumped", "consistent"] = "lumped", project: bool = True,
-                 warping: bool = True, linear_solver: LinearSolver | None = None) -> None:
+                 warping: bool = True, linear_solver: LinearSolver | str | None = None) -> None:
         super().__init__(mass, 0, linear_solver)
         self.project, self.warping = bool(project), bool(warping)
 

@@ -87,10 +87,6 @@ class VelocityVerlet(_Explicit):
 
     order = 2
     _modified_energy = True
-    # Set by _Explicit.__init__ / _forget; declared here for the type checker.
-    substep: bool
-    # (positions, dPi/dx there); the ignore goes once _Explicit._forget annotates it alike
-    _gradient: tuple[np.ndarray | None, np.ndarray | None]
 
     # -- what it remembers: the force at the end of the step ---------------------------------
     def step(self, model: AnyModel, state: State, dt: float) -> State:
@@ -114,7 +110,7 @@ class VelocityVerlet(_Explicit):
         if self.substep:
             return super().checkpoint_state(state)
         at, g = self._gradient
-        return {"gradient": g.copy()} if at is state.x and g is not None else {}  # (g is set with at)
+        return {"gradient": g.copy()} if at is state.x else {}
 
     def restore_state(self, state: State, saved: dict) -> None:
         """Take back what :meth:`checkpoint_state` returned (an empty dict starts afresh)."""
