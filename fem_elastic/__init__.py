@@ -154,6 +154,7 @@ from .solvers import (
     CholmodSolver,
     DirectSolver,
     LinearSolverFailed,
+    PETScSolver,
     EquilibriumPoint,
     LoadPath,
     RoundoffWarning,
@@ -198,7 +199,7 @@ __all__ = [
     "ProjectiveCorotated", "ProjectiveDynamics", "ShapeMatcher", "ShapeMatching",
     "PBD", "XPBD", "ConstraintNeoHookean",
     "CollisionSurface", "collision_surface", "IPCContact", "BoundIPCContact",
-    "Body", "MultiBody",
+    "Body", "MultiBody", "PETScSolver",
     "ImpulseContact", "BoundImpulseContact", "RestContactWarning", "collide_particles", "BoundingSpheres",
 ]
 

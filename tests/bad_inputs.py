@@ -93,6 +93,12 @@ def _model(mesh=None, **options):
     return fe.Model(_mesh() if mesh is None else mesh, density=1000.0, body=_body(), **options)
 
 
+def _partition(mesh, nparts):
+    from fem_elastic.solvers.partition import partition_elements
+
+    return partition_elements(mesh.t, nparts)
+
+
 def _inverted_mesh():
     mesh = _mesh()
     t = mesh.t.T.copy()
@@ -708,6 +714,16 @@ BAD_INPUTS: list[BadInput] = [
              lambda tmp: fe.MultiBody([fe.Body(fe.beam_mesh(cells=(1, 1, 1)), 1000.0,
                                                fe.ElasticBody(fe.LinearElastic(E=1e6, nu=0.3)), name="a")] * 2),
              IP, "body names must be unique, but ['a'] appear more than once", "give each body its own name"),
+    # the distributed backend (issue 21)
+    BadInput("fe.PETScSolver() on a model with an obstacle (contact)",
+             lambda tmp: fe.solve_static(_model(gravity=(0, 0, -9.81), ground=fe.Ground(z=-1.0)),
+                                         linear_solver=fe.PETScSolver()), IP,
+             "does not handle contact (obstacles or contact=) yet", "use a serial linear solver"),
+    BadInput("more MPI ranks than tets (a 6-tet mesh split 7 ways)",
+             lambda tmp: _partition(fe.beam_mesh(cells=(1, 1, 1)), 7), IP,
+             "cannot split 6 tets among 7 MPI ranks", "Run with at most 6 rank(s)"),
+    BadInput('fe.PETScSolver(preconditioner="ilu")', lambda tmp: fe.PETScSolver(preconditioner="ilu"), IP,
+             "preconditioner must be one of ('gamg', 'lu')", "got 'ilu'"),
     # checkpoints (item 8)
     BadInput("a checkpoint's frames.f64 changed after it was written", _resume_altered, IP,
              "frames.f64 does not hold what its checkpoint recorded (CRC-32", "to start the run afresh"),

@@ -5,7 +5,8 @@ Subcommands::
     fem-elastic demo [--out DIR]                 the default scene: a cantilever released
                                                  under gravity, Neo-Hookean FEM beside a
                                                  mass-spring copy, rendered to MP4/PNG/VTU
-    fem-elastic run SCENE.toml --out DIR         run a scene file
+    fem-elastic run SCENE.toml --out DIR         run a scene file (--ranks N, or under
+                                                 mpiexec: across MPI ranks, fem_elastic.app.mpi_run)
     fem-elastic render DIR --format mp4|gif|png  render a run's VTU series
     fem-elastic info MESH                        counts, quality and boundaries of a mesh
     fem-elastic study accuracy|stability --out DIR [--quick]
@@ -231,8 +232,30 @@ def _run(args) -> int:
             "give a scene and an output directory (`fem-elastic run SCENE.toml --out DIR`), or "
             "`fem-elastic run --resume DIR` to continue a run."
         )
+    if args.ranks is not None and args.ranks > 1:
+        from .mpi_run import relaunch
+
+        load_scene(args.scene)  # a bad scene is reported once, before mpiexec starts
+        return relaunch(args.argv, args.ranks)
     scene = load_scene(args.scene)
-    out(f"scene {scene.name!r} from {args.scene}: variants {', '.join(scene.variants)}")
+    from .mpi_run import check_distributed_scene, launcher_world
+
+    rank, size = launcher_world()
+    if size > 1:  # under mpiexec: rank 0 writes and prints; the others run into a scratch dir
+        check_distributed_scene(scene, size)
+        if rank != 0:
+            import shutil
+            import tempfile
+
+            scratch = tempfile.mkdtemp(prefix=f"fem_elastic_rank{rank}_")
+            try:
+                _run_scene_command(scene, Path(scratch) / "out", _Out(True), variants=args.variant or None,
+                                   progress=False, render=False, checkpoint_every=args.checkpoint_every)
+            finally:
+                shutil.rmtree(scratch, ignore_errors=True)
+            return 0
+    out(f"scene {scene.name!r} from {args.scene}: variants {', '.join(scene.variants)}"
+        + (f" on {size} MPI ranks" if size > 1 else ""))
     return _run_scene_command(
         scene, args.out, out, variants=args.variant or None, progress=not args.quiet,
         render=not args.no_render, checkpoint_every=args.checkpoint_every,
@@ -560,6 +583,9 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--checkpoint-every", type=_non_negative_int, metavar="N",
                      help="write a checkpoint every N steps (default the scene's [output] "
                           "checkpoint_every; checkpoints are always written on Ctrl-C and at the end)")
+    run.add_argument("--ranks", type=_positive_int, metavar="N",
+                     help="run on N MPI ranks: starts `mpiexec -n N` on this command (the scene must "
+                          'solve with linear_solver = "petsc"; needs the [mpi] extra)')
     run.add_argument("--resume", metavar="DIR",
                      help="continue the run whose output is in DIR from its last checkpoints; the "
                           "result is bit for bit that of an uninterrupted run")
@@ -642,6 +668,7 @@ def main(argv=None) -> int:
 def _main(argv) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else [str(a) for a in argv])  # for --ranks
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",

@@ -684,7 +684,7 @@ class Scene:
 
         solve = self.spec["solve"]
         static = {"steps": solve["steps"], "stability": solve["stability"],
-                  "stabilize": solve["stabilize"]}
+                  "stabilize": solve["stabilize"], "linear_solver": solve["linear_solver"]}
         info = self._info(name, body, None, None, mesh_info, solve["steps"])
         return BuiltRun(
             name=name, model=model, integrator=None, dt=0.0, steps=solve["steps"],

@@ -46,6 +46,7 @@ from ..dynamics.shape_matching import MODES as SHAPE_MATCHING_MODES
 from ..dynamics.shape_matching import ShapeMatching
 from ..solvers.linear_solvers import AMGSolver, AutoSolver, DirectSolver
 from ..solvers.cholmod import CholmodSolver  # scikit-sparse imported only when one is made
+from ..solvers.petsc_solver import PETScSolver  # petsc4py imported only when one solves
 from ..materials import Corotated, LinearElastic, NeoHookean, StableNeoHookean, StVK
 from ..physics.springs import lloyd_stiffness, van_gelder_stiffness
 from .schema_types import (
@@ -107,7 +108,8 @@ INTEGRATORS = {
 }
 CALIBRATIONS = {"van_gelder": van_gelder_stiffness, "lloyd": lloyd_stiffness}
 #: ``linear_solver = "..."`` in [integrator]: the solver objects it stands for
-LINEAR_SOLVERS = {"auto": AutoSolver, "direct": DirectSolver, "amg": AMGSolver, "cholmod": CholmodSolver}
+LINEAR_SOLVERS = {"auto": AutoSolver, "direct": DirectSolver, "amg": AMGSolver, "cholmod": CholmodSolver,
+                  "petsc": PETScSolver}
 MOTIONS = ("twist", "translate")
 RENDER_FORMATS = ("mp4", "gif", "png")
 CONTACT_TYPES = ("ipc", "impulse")  # the [contact] table's types (physics.ipc_contact, physics.impulse_contact)
@@ -396,6 +398,9 @@ SOLVE = Table(
             "equilibrium (warn when unstable)", when={"kind": ("static",)}),
         Key("stabilize", Boolean(), False, doc="perturb an unstable equilibrium along its lowest "
             "mode until it is stable", when={"kind": ("static",)}),
+        Key("linear_solver", Choice(("auto", "direct", "amg", "cholmod", "petsc")), "auto",
+            doc='linear solver of the Newton iterations; "petsc" solves across MPI ranks '
+                "(mpiexec -n N fem-elastic run ...; no stability check)", when={"kind": ("static",)}),
     ),
     'What is solved. A static scene has no [integrator], [time], [initial], [damping] or '
     "[[loads.driven]]: leave them out.",

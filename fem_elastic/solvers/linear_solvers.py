@@ -582,7 +582,7 @@ def _have_pyamg() -> bool:
 
 
 #: the linear solvers by name (``linear_solver="..."`` in Python and in scene files)
-LINEAR_SOLVER_NAMES = ("auto", "direct", "amg", "cholmod")
+LINEAR_SOLVER_NAMES = ("auto", "direct", "amg", "cholmod", "petsc")
 
 
 def as_linear_solver(spec=None):
@@ -603,6 +603,10 @@ def as_linear_solver(spec=None):
             from .cholmod import CholmodSolver
 
             return CholmodSolver()
+        if spec == "petsc":
+            from .petsc_solver import PETScSolver
+
+            return PETScSolver()
         named = {"auto": AutoSolver, "direct": DirectSolver, "amg": AMGSolver}.get(spec)
         if named is None:
             raise InvalidParameter(

@@ -447,6 +447,9 @@ def solve_static(
         ``fe.DirectSolver()``, ``fe.AMGSolver()``, ``fe.CholmodSolver()`` or the
         default ``fe.AutoSolver()`` (its docstring has the rule), or one of their
         names ``"direct"``, ``"amg"``, ``"cholmod"``, ``"auto"``.
+        ``fe.PETScSolver()`` solves across MPI ranks (run the script with
+        ``mpiexec -n N``; :mod:`fem_elastic.solvers.distributed_newton`): same
+        result on every rank, no stability check (``min_eigenvalue`` is None).
     project : bool
         Project the tangent to positive semi-definite per quadrature point
         while far from equilibrium (guarantees a descent direction under
@@ -505,6 +508,16 @@ def solve_static(
             f"initial_load_step={initial_load_step!r}, min_load_step={min_load_step!r}."
         )
     reject_impulse_contact(model, "fe.solve_static")
+    if linear_solver == "petsc" or type(linear_solver).__name__ == "PETScSolver":
+        from .distributed_newton import solve_static_distributed  # across MPI ranks: its own module
+        from .petsc_solver import PETScSolver
+
+        petsc_solver = PETScSolver() if isinstance(linear_solver, str) else cast(PETScSolver, linear_solver)
+        if stability or stabilize:
+            log.info("solve_static with fe.PETScSolver: no stability check on the distributed path")
+        return solve_static_distributed(model, petsc_solver, rtol=rtol, max_iter=max_iter, project=project,
+                                        initial_load_step=initial_load_step, min_load_step=min_load_step,
+                                        check=check, steps=steps)
     model.check_supported()
     memory_check = getattr(model, "check_tangent_memory", None)  # before any assembly (ResourceLimit)
     if memory_check is not None:

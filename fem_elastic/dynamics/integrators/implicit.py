@@ -131,6 +131,17 @@ class _Implicit(Integrator):
         )
 
 
+def _count_newton(stats, res) -> None:
+    """Add a Newton solve's statistics (serial or distributed) to the step's."""
+    stats.newton_iterations += res.iterations
+    stats.line_search_cuts += res.line_search_cuts
+    stats.linear_iterations += res.linear_iterations
+    stats.linear_solves += res.linear_solves
+    stats.linear_setups += res.linear_setups
+    for k, v in res.seconds.items():
+        stats.seconds[k] = stats.seconds.get(k, 0.0) + v
+
+
 class ImplicitEuler(_Implicit):
     """Backward Euler by minimising the incremental potential with Newton.
 
@@ -153,7 +164,9 @@ class ImplicitEuler(_Implicit):
         PSD-projected Hessian away from the solution (see :mod:`fem_elastic.solvers.newton`).
     linear_solver : object or str, optional
         ``fe.DirectSolver()``, ``fe.AMGSolver()``, or a name (``"direct"``, ``"amg"``,
-        ``"auto"``, ``"cholmod"``); default ``fe.AutoSolver()``.
+        ``"auto"``, ``"cholmod"``); default ``fe.AutoSolver()``. ``fe.PETScSolver()``
+        (``"petsc"``) solves each step across MPI ranks (``mpiexec -n N``;
+        :mod:`fem_elastic.solvers.distributed_newton`; no contact or damping there).
 
     Examples
     --------
@@ -190,6 +203,8 @@ class ImplicitEuler(_Implicit):
         return G.y.copy()
 
     def _try(self, model, state, h, stats):
+        if type(self.linear_solver).__name__ == "PETScSolver" and type(self) is ImplicitEuler:
+            return self._try_distributed(model, state, h, stats)
         free, dofs, xc, vc = self._start(model, state, h)
         G = self._objective(model, state, h)
         # First guess: the inertial prediction y or the old positions, whichever has the lower
@@ -235,14 +250,8 @@ class ImplicitEuler(_Implicit):
                     gradient=counted.gradient, g_floor=G.gradient_roundoff(x0),
                     **self._solver_settings(model),
                 )
-                stats.newton_iterations += res.iterations
                 stats.gradient_evaluations += counted.calls
-                stats.line_search_cuts += res.line_search_cuts
-                stats.linear_iterations += res.linear_iterations
-                stats.linear_solves += res.linear_solves
-                stats.linear_setups += res.linear_setups
-                for k, v in res.seconds.items():
-                    stats.seconds[k] = stats.seconds.get(k, 0.0) + v
+                _count_newton(stats, res)
                 if not res.converged:
                     return None, f"Newton did not converge ({res.message})"
                 x0 = res.x
@@ -252,6 +261,23 @@ class ImplicitEuler(_Implicit):
         x1 = res.x
         v1 = self._velocity(state, x1, h)
         return self._finish(model, x1, v1, state.t + h), ""
+
+    def _try_distributed(self, model, state, h, stats):
+        """One step across the MPI ranks (fe.PETScSolver): solvers.distributed_newton."""
+        from ...solvers.distributed_newton import implicit_euler_step
+
+        free, dofs, xc, vc = self._start(model, state, h)
+        G = self._objective(model, state, h)
+        x_old = state.x.copy()
+        x_old[dofs] = xc
+        scale = G.scale(state, free)
+        x1, res = implicit_euler_step(
+            model, self.linear_solver, G.y, h, self.mass, dofs, xc, [G.y, x_old], rtol=self.rtol,
+            max_iter=self.max_iter, project=self.project, g_scale=scale if scale > 0 else None)
+        _count_newton(stats, res)
+        if not res.converged:
+            return None, f"Newton did not converge ({res.message})"
+        return self._finish(model, x1, self._velocity(state, x1, h), state.t + h), ""
 
     def step_matrix(self, h: float, omega: float, zeta: float = 0.0) -> np.ndarray:
         return np.linalg.inv(np.eye(2) - h * self._oscillator(omega, zeta))
