@@ -62,7 +62,7 @@ def test_one_rank_implicit_euler_with_consistent_mass_equals_serial():
 
 
 def test_partition_owns_every_node_once_in_contiguous_blocks():
-    pytest.importorskip("pymetis")
+    require_mpi()
     m = _beam(fe.LinearElastic(E=1e6, nu=0.3), order=2, cells=(12, 3, 3))
     t = m.mesh.t
     for nparts in (2, 3, 5):
@@ -115,3 +115,37 @@ def test_ranks_without_a_launcher_is_a_typed_error(monkeypatch, tmp_path):
     monkeypatch.setenv("PATH", str(tmp_path))  # no mpiexec anywhere
     with pytest.raises(fe.MissingDependency, match="no mpiexec on the PATH"):
         relaunch_command(["run", "scene.toml", "--ranks", "2"], 2)
+
+
+def test_gamg_solves_p2_and_many_solves_fit_petsc_options():
+    require_mpi()
+    # P2 tangents need another GAMG smoother than P1 (petsc_solver.PETScSolver.settings)
+    m = _beam(fe.NeoHookean(E=1e6, nu=0.3), order=2, cells=(6, 2, 2), gravity=(0, 0, -9.81))
+    s0 = fe.solve_static(m, rtol=1e-10, stability=False)
+    r = fe.solve_static(m, linear_solver=fe.PETScSolver(), rtol=1e-10)
+    assert np.linalg.norm(r.x - s0.x) < 1e-8 * np.linalg.norm(s0.x - m.X)  # both at 1e-10 of the load
+    # PETSc 3.18 holds 512 options: a solver configuration writes its options once, not per KSP
+    A = sp.diags([2.0, 3.0, 4.0]).tocsr()
+    for _ in range(600):
+        x = fe.PETScSolver(preconditioner="lu").solve(A, np.ones(3)).x
+    assert np.allclose(x, [0.5, 1 / 3, 0.25], rtol=1e-14)  # LU: exact to round-off
+
+
+def test_tiny_implicit_steps_converge_at_the_inertia_round_off_floor():
+    require_mpi()
+    # at dt = 1e-6 s the inertia term's round-off (grows as 1/h^2) is far above the body's: Newton
+    # must stop there, as the serial one does, instead of failing to reach rtol
+    m = _beam(fe.NeoHookean(E=1e6, nu=0.3), gravity=(0, 0, -9.81))
+    a = fe.ImplicitEuler().step(m, fe.State.rest(m), 1e-6)
+    b = fe.ImplicitEuler(linear_solver=fe.PETScSolver()).step(m, fe.State.rest(m), 1e-6)
+    # the step moves 1/2 g h^2 = 5e-12 m; both are at round-off of that motion's force
+    assert np.abs(b.x - a.x).max() < 1e-15 + 1e-6 * np.abs(a.x - m.X).max()
+
+
+def test_strip_ranks_removes_every_spelling():
+    from fem_elastic.app.mpi_run import _strip_ranks
+
+    for argv in (["run", "s.toml", "--ranks", "2"], ["run", "--ranks=2", "s.toml"],
+                 ["run", "s.toml", "--rank", "2"], ["run", "--ran=3", "s.toml"]):
+        assert _strip_ranks(argv) == ["run", "s.toml"], argv
+    assert _strip_ranks(["run", "--resume", "d"]) == ["run", "--resume", "d"]  # not a --ranks

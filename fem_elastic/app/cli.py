@@ -226,6 +226,13 @@ def _run(args) -> int:
                 "--resume DIR continues the run in DIR with the scene, variants and checkpoint "
                 "interval it was started with: give it alone (`fem-elastic run --resume DIR`)."
             )
+        from .mpi_run import launcher_world
+
+        if args.ranks is not None or launcher_world()[1] > 1:
+            raise InvalidParameter(
+                "--resume continues a run in one process: run `fem-elastic run --resume DIR` without "
+                "--ranks and without mpiexec (its static or implicit solves then run on one rank)."
+            )
         return _resume(args, out)
     if args.scene is None or args.out is None:
         raise InvalidParameter(

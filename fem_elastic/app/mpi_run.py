@@ -49,15 +49,15 @@ def check_distributed_scene(scene, size: int) -> None:
 
 
 def _strip_ranks(argv: list[str]) -> list[str]:
+    """``argv`` without ``--ranks N`` (or ``--ranks=N``, or argparse's abbreviations ``--ran N`` ...)."""
     out, skip = [], False
     for a in argv:
         if skip:
             skip = False
             continue
-        if a == "--ranks":
-            skip = True
-            continue
-        if a.startswith("--ranks="):
+        name = a.split("=", 1)[0]
+        if len(name) >= 4 and "--ranks".startswith(name):  # "--r" alone is ambiguous with --resume
+            skip = "=" not in a
             continue
         out.append(a)
     return out

@@ -52,8 +52,8 @@ def check_distributable(model, what: str) -> None:
 
     if not isinstance(getattr(model, "body_potential", None), ElasticPotential):
         raise InvalidParameter(
-            f"{what} with fe.PETScSolver distributes an fe.ElasticBody (displacement formulation) "
-            f"on one tet mesh; this model's body is {type(getattr(model, 'body', model)).__name__}. "
+            f"{what} with fe.PETScSolver distributes an fe.ElasticBody on one tet mesh; this "
+            f"model's body is {type(getattr(model, 'body', model)).__name__}. "
             "Use a serial linear solver (linear_solver='auto') for it."
         )
     if model.contacts or model.contact is not None:
@@ -115,8 +115,10 @@ class DistributedProblem:
         self.body = model.body.build(self.subspace)
         local_to_global = np.empty(self.subspace.ndofs, dtype=np.int64)
         local_to_global[self.subspace.element_dofs] = space.element_dofs[:, elems]
-        if not np.array_equal(self.subspace.X, space.X[local_to_global]):
-            raise RuntimeError("internal error: the sub-mesh's DOFs do not match the model's")
+        matched = bool(self.mpi.allreduce(np.array_equal(self.subspace.X, space.X[local_to_global]),
+                                          op=_mpi_land()))
+        if not matched:  # raised on every rank, so none waits in a collective for the others
+            raise RuntimeError("internal error: a rank's sub-mesh DOFs do not match the model's")
         self.local_to_global = local_to_global
         new_of_old = self.partition.new_dofs(np.arange(self.ndofs))
         self.old_of_new = np.empty(self.ndofs, dtype=np.int64)
@@ -332,10 +334,19 @@ class DistributedProblem:
 
     def destroy(self) -> None:
         """Free the PETSc objects."""
-        for obj in (self.A, self.M, getattr(self, "_Mf", None), self.scatter, self.x_local,
-                    self.__dict__.get("_ksp")):
+        from .distributed_newton import destroy_ksp
+
+        for obj in (self.A, self.M, getattr(self, "_Mf", None), self.scatter, self.x_local):
             if obj is not None:
                 obj.destroy()
+        if self.__dict__.get("_ksp") is not None:
+            destroy_ksp(self.__dict__.pop("_ksp"))
+
+
+def _mpi_land():
+    from mpi4py import MPI
+
+    return MPI.LAND
 
 
 _PROBLEMS: "weakref.WeakKeyDictionary[Any, dict]" = weakref.WeakKeyDictionary()

@@ -28,11 +28,12 @@ from typing import Any, cast
 
 import numpy as np
 
-from ..errors import NotConverged
+from ..errors import InvalidParameter, NotConverged
+from .linear_solvers import LinearSolverFailed
 from .distributed import check_distributable, distributed_problem
 from .petsc_solver import PETScSolver, comm_world
 
-__all__ = ["DistributedNewton", "solve_static_distributed", "implicit_euler_step"]
+__all__ = ["DistributedNewton", "solve_static_distributed", "implicit_euler_step", "destroy_ksp"]
 
 log = logging.getLogger(__name__)
 
@@ -57,22 +58,25 @@ class DistributedNewton:
 
 def minimize(problem, ksp, x, *, s: float = 1.0, y=None, k: float = 0.0, rtol: float = 1e-8,
              g_scale: float | None = None, max_iter: int = 30, min_iter: int = 0,
-             armijo: float = 1e-4, max_cuts: int = 30, project: bool = True) -> DistributedNewton:
+             armijo: float = 1e-4, max_cuts: int = 30, project: bool = True,
+             energy_roundoff: float | None = None, g_floor: float | None = None) -> DistributedNewton:
     """Minimise G over the free DOFs from the distributed vector ``x`` (updated in place).
 
     ``x`` must hold the held DOFs' values already. Converged when ||g_free|| <=
     ``rtol * g_scale`` (N), ``g_scale`` being the largest of the one given, the first
     ||g_free|| and the held DOFs' reaction then; or when the Newton step predicts an
     energy change below the energy's round-off (``eps |G|`` plus the body's own) and
-    ||g|| is within ten times its round-off floor.
+    ||g|| is within ten times its round-off floor. The floors default to the model's
+    (statics); an implicit step passes the incremental potential's, which add the inertia
+    term's (they grow as 1/h^2).
     """
     result = DistributedNewton()
     free = problem.free_owned
     g = problem.vec()
     dx = problem.vec()
     x_try = problem.vec()
-    e_noise = problem.model.energy_roundoff()
-    g_floor = problem.model.gradient_roundoff()
+    e_noise = problem.model.energy_roundoff() if energy_roundoff is None else energy_roundoff
+    g_floor = problem.model.gradient_roundoff() if g_floor is None else g_floor
     try:
         e = problem.energy(x, s, y, k)
         if not math.isfinite(e):
@@ -108,7 +112,9 @@ def minimize(problem, ksp, x, *, s: float = 1.0, y=None, k: float = 0.0, rtol: f
                 exact = False
                 slope, its = _direction(problem, ksp, x, g, dx, k, False, eta, result)
             if not slope < 0.0:  # steepest descent, scaled like the Newton step
-                length = dx.norm() or gnorm
+                # without one, a step of g / max diag(H) (m), as the serial Newton
+                length = dx.norm() or gnorm / max(problem.A.getDiagonal().norm(problem.PETSc.NormType.INFINITY),
+                                                  _EPS)
                 g.copy(dx)
                 dx.scale(-length / gnorm)
                 slope = float(g.dot(dx))
@@ -137,8 +143,8 @@ def minimize(problem, ksp, x, *, s: float = 1.0, y=None, k: float = 0.0, rtol: f
             x_try.copy(x)
             e = e_try
             result.iterations = it + 1
-            if project and alpha == 1.0:
-                exact = True  # near the solution: the exact tangent converges quadratically
+            if project:  # near the solution (a full step): the exact tangent converges quadratically
+                exact = alpha == 1.0
         return result
     finally:
         for v in (g, dx, x_try):
@@ -153,7 +159,7 @@ def _direction(problem, ksp, x, g, dx, k, exact, eta, result):
     t0 = time.perf_counter()
     ksp.setOperators(A)
     rtol0 = ksp.getTolerances()[0]
-    ksp.setTolerances(rtol=min(rtol0, eta) if eta else rtol0)
+    ksp.setTolerances(rtol=max(rtol0, eta) if eta else rtol0)  # the forcing term loosens, never tightens
     rhs = g.duplicate()
     g.copy(rhs)
     rhs.scale(-1.0)
@@ -170,7 +176,7 @@ def _direction(problem, ksp, x, g, dx, k, exact, eta, result):
         # positive definite preconditioner, solves with the same set-up hierarchy
         log.info("CG met an indefinite preconditioner on the projected tangent; GMRES instead")
         gmres = _gmres(ksp)
-        gmres.setTolerances(rtol=min(rtol0, eta) if eta else rtol0)
+        gmres.setTolerances(rtol=max(rtol0, eta) if eta else rtol0)
         dx.set(0.0)
         gmres.solve(rhs, dx)
         its = int(gmres.getIterationNumber())
@@ -183,13 +189,17 @@ def _direction(problem, ksp, x, g, dx, k, exact, eta, result):
     if reason in _KSP_DIVERGED_INDEFINITE:
         return math.nan, its
     if reason < 0 and reason != -3:  # -3: the iteration limit; its iterate may still descend
-        log.info("KSP stopped with reason %d after %d iterations", reason, its)
+        # the same reason on every rank (KSP reasons are collective): raised everywhere
+        raise LinearSolverFailed(
+            f"the PETSc linear solve failed (KSP converged reason {reason}, after {its} iterations): "
+            "try fe.PETScSolver(preconditioner='lu'), or other GAMG options (options={...})."
+        )
     return float(g.dot(dx)), its
 
 
 def _gmres(ksp):
-    """A GMRES KSP on ``ksp``'s operators and preconditioner (made once per KSP)."""
-    gmres = _GMRES.get(ksp.handle)
+    """A GMRES KSP on ``ksp``'s operators and preconditioner, kept on ``ksp`` (made once)."""
+    gmres = ksp.getAttr("fe_gmres")
     if gmres is None:
         from .petsc_solver import petsc
 
@@ -200,13 +210,19 @@ def _gmres(ksp):
         gmres.setPC(ksp.getPC())
         gmres.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
         gmres.setPCSide(PETSc.PC.Side.RIGHT)
-        _GMRES[ksp.handle] = gmres
+        ksp.setAttr("fe_gmres", gmres)
     gmres.setOperators(*ksp.getOperators())
     gmres.setTolerances(max_it=ksp.getTolerances()[3])
     return gmres
 
 
-_GMRES: dict = {}
+def destroy_ksp(ksp) -> None:
+    """Destroy a KSP of this module and the GMRES fallback kept on it."""
+    gmres = ksp.getAttr("fe_gmres")
+    if gmres is not None:
+        ksp.setAttr("fe_gmres", None)
+        gmres.destroy()
+    ksp.destroy()
 
 
 def _held_positions(model, s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -231,20 +247,37 @@ def _set_held(problem, x, held, values):
 def solve_static_distributed(model, solver: PETScSolver, *, rtol: float = 1e-8, max_iter: int = 30,
                              project: bool = True, initial_load_step: float = 1.0,
                              min_load_step: float = 1.0 / 1024, check: bool = True,
-                             steps: int | None = None):
+                             steps: int | None = None, stabilize: bool = False):
     """``fe.solve_static`` across the MPI ranks; the same :class:`StaticResult` on every rank.
 
     Parameters are those of :func:`fem_elastic.solve_static`. The stability check
     (lowest eigenvalue) is not made on this path: ``min_eigenvalue`` is None.
     """
-    from .static import EquilibriumPoint, StaticResult, _vertex_forces
 
     check_distributable(model, "fe.solve_static")
+    if stabilize:
+        raise InvalidParameter(
+            "solve_static(stabilize=True) perturbs along the lowest eigenmode, and the distributed "
+            "path (fe.PETScSolver) makes no stability check: leave out stabilize, or solve serially."
+        )
     model.check_supported()
     t_start = time.perf_counter()
     comm = comm_world()
     problem = distributed_problem(model, comm, model.held_dofs, mass=None)
-    ksp = solver.ksp(comm)
+    ksp = solver.ksp(comm, model.space.order)
+    try:
+        return _load_path(model, problem, ksp, t_start, rtol=rtol, max_iter=max_iter, project=project,
+                          initial_load_step=initial_load_step, min_load_step=min_load_step,
+                          check=check, steps=steps)
+    finally:
+        destroy_ksp(ksp)
+
+
+def _load_path(model, problem, ksp, t_start, *, rtol, max_iter, project, initial_load_step,
+               min_load_step, check, steps):
+    """The load steps of :func:`solve_static_distributed` (its KSP made and destroyed there)."""
+    from .static import EquilibriumPoint, StaticResult, _vertex_forces
+
     x = problem.to_vec(model.X)
     # the problem's force scale: the load, plus what the prescribed displacements exert at rest
     f_free = problem.f_owned[problem.free_owned]
@@ -257,7 +290,10 @@ def solve_static_distributed(model, solver: PETScSolver, *, rtol: float = 1e-8, 
         dv, Kd = problem.to_vec(d), problem.vec()
         K0.mult(dv, Kd)
         kd = Kd.getArray(readonly=True)[problem.free_owned]
-        u_scale = math.sqrt(problem.allsum(float(kd @ kd))) or 1.0
+        u_scale = math.sqrt(problem.allsum(float(kd @ kd)))
+        if u_scale == 0.0:  # no free DOF feels it: the forces on all (as the serial solve)
+            ka = Kd.getArray(readonly=True)
+            u_scale = math.sqrt(problem.allsum(float(ka @ ka))) or 1.0
         for v in (dv, Kd, K0):
             v.destroy()
     g_scale_full = f_scale + u_scale
@@ -314,7 +350,6 @@ def solve_static_distributed(model, solver: PETScSolver, *, rtol: float = 1e-8, 
                 total.message = (f"stalled at load factor {s:.4g}: the increment fell below "
                                  f"{min_load_step:.3g} (last failure: {res.message})")
                 break
-    ksp.destroy()
     x.destroy()
     total.load_factor = s
     total.converged = s >= 1.0
@@ -346,7 +381,8 @@ def _rest_stiffness_full(problem) -> Any:
 
 def implicit_euler_step(model, solver: PETScSolver, y: np.ndarray, h: float, mass: str,
                         held: np.ndarray, held_values: np.ndarray, starts: list, *,
-                        rtol: float, max_iter: int, project: bool, g_scale: float | None):
+                        rtol: float, max_iter: int, project: bool, g_scale: float | None,
+                        energy_roundoff: float | None = None, g_floor: float | None = None):
     """Minimise ``|x - y|_M^2 / (2 h^2) + Pi(x)`` across the ranks; (x, result).
 
     ``starts`` are first guesses (replicated model vectors, e.g. the inertial
@@ -359,7 +395,9 @@ def implicit_euler_step(model, solver: PETScSolver, y: np.ndarray, h: float, mas
     problem = distributed_problem(model, comm, held, mass=mass)
     ksp = problem.__dict__.get("_ksp")
     if ksp is None or problem.__dict__.get("_ksp_solver") is not solver:
-        ksp = problem.__dict__["_ksp"] = solver.ksp(comm)
+        if ksp is not None:
+            destroy_ksp(ksp)
+        ksp = problem.__dict__["_ksp"] = solver.ksp(comm, model.space.order)
         problem.__dict__["_ksp_solver"] = solver
     yv = problem.to_vec(y)
     best, x = math.inf, cast(Any, None)
@@ -374,7 +412,7 @@ def implicit_euler_step(model, solver: PETScSolver, y: np.ndarray, h: float, mas
         else:
             xs.destroy()
     res = minimize(problem, ksp, x, s=1.0, y=yv, k=h, rtol=rtol, g_scale=g_scale, max_iter=max_iter,
-                   project=project)
+                   project=project, energy_roundoff=energy_roundoff, g_floor=g_floor)
     out = problem.gather(x)
     for v in (x, yv):
         v.destroy()

@@ -32,7 +32,7 @@ __all__ = ["PETScSolver", "petsc", "comm_world", "launcher_world"]
 log = logging.getLogger(__name__)
 
 _PRECONDITIONERS = ("gamg", "lu")
-_KSP_COUNT = 0  # KSPs made so far: the options prefix of the next
+_PREFIXES: dict = {}  # options prefix of each distinct solver configuration
 
 
 def petsc() -> Any:
@@ -45,10 +45,10 @@ def petsc() -> Any:
     return PETSc
 
 
-#: the environment variables in which MPI launchers (Open MPI, MPICH/Hydra, PMIx) give each
+#: the environment variables in which MPI launchers (Open MPI, MPICH/Hydra, Slurm's srun) give each
 #: process its rank and the number of processes
 _LAUNCHER_VARS = (("OMPI_COMM_WORLD_RANK", "OMPI_COMM_WORLD_SIZE"), ("PMI_RANK", "PMI_SIZE"),
-                  ("PMIX_RANK", "PMIX_SIZE"))
+                  ("SLURM_PROCID", "SLURM_NTASKS"))
 
 
 def launcher_world() -> tuple[int, int]:
@@ -112,6 +112,8 @@ class PETScSolver:
     path: under ``mpiexec -n N`` each rank assembles its share of the tets
     (METIS partition) into one PETSc matrix; every rank returns the same
     result. With one process (no ``mpiexec``) it is the same code on one rank.
+    Other integrators (Newmark, the trapezoid, the linearized implicit Euler) call
+    :meth:`solve` as a serial linear solver in each process.
 
     Examples
     --------
@@ -140,36 +142,53 @@ class PETScSolver:
             raise InvalidParameter(f"max_it must be a whole number >= 1, got {self.max_it!r}.")
         if not isinstance(self.options, dict):
             raise InvalidParameter(f"options must be a dict of PETSc options, got {self.options!r}.")
-        self._count = 0
 
     # --- the KSP, set up from this solver's choices -------------------------------------
-    def ksp(self, comm: Any) -> Any:
-        """A new PETSc KSP on ``comm`` configured as this solver says (options prefixed, isolated)."""
+    def ksp(self, comm: Any, order: int = 1) -> Any:
+        """A new PETSc KSP on ``comm`` configured as this solver says, for tets of ``order``.
+
+        The settings go through PETSc's options database under a prefix of their own,
+        one per distinct configuration (not per KSP: PETSc 3.18 holds at most 512
+        options, and a sweep makes thousands of KSPs).
+        """
         PETSc = petsc()
-        ksp = PETSc.KSP().create(comm=comm)
-        global _KSP_COUNT
-        _KSP_COUNT += 1
-        prefix = f"fe{_KSP_COUNT}_"  # each KSP its own options
-        ksp.setOptionsPrefix(prefix)
+        values = self.settings(comm.getSize(), order)
+        key = tuple(sorted((k, str(v)) for k, v in values.items()))
+        prefix = _PREFIXES.get(key)
         opts = PETSc.Options()
-        if self.preconditioner == "gamg":
-            # smoother: symmetric SOR sweeps (Richardson). GAMG's default, Chebyshev on Jacobi,
-            # rests on an estimate of the largest eigenvalue with a 10 % margin; on 2 ranks it
-            # came out low on Neo-Hookean tangents of the test beam and made the preconditioner
-            # indefinite (CG: KSP_DIVERGED_INDEFINITE_PC) at one iterate in ten; SOR sweeps need
-            # no estimate and took 617 CG iterations for that solve where Chebyshev with a 30 %
-            # margin took 1112 (tests/mpi/compare_serial.py's beam, scripts/bench_mpi.py)
-            values = {"ksp_type": "cg", "pc_type": "gamg", "ksp_norm_type": "unpreconditioned",
-                      "mg_levels_ksp_type": "richardson", "mg_levels_pc_type": "sor"}
-        else:
-            values = {"ksp_type": "preonly", "pc_type": "lu",
-                      "pc_factor_mat_solver_type": "mumps" if comm.getSize() > 1 else "petsc"}
-        values.update(self.options)
-        for k, v in values.items():
-            opts[prefix + k] = v
+        if prefix is None:
+            prefix = _PREFIXES[key] = f"fe{len(_PREFIXES) + 1}_"
+            for k, v in values.items():
+                opts[prefix + k] = v
+        ksp = PETSc.KSP().create(comm=comm)
+        ksp.setOptionsPrefix(prefix)
         ksp.setFromOptions()
         ksp.setTolerances(rtol=float(self.rtol), atol=0.0, max_it=int(self.max_it))
         return ksp
+
+    def settings(self, ranks: int, order: int = 1) -> dict:
+        """The PETSc options (without prefix) of this solver on ``ranks`` ranks, tets of ``order``."""
+        if self.preconditioner == "gamg":
+            values: dict = {"ksp_type": "cg", "pc_type": "gamg", "ksp_norm_type": "unpreconditioned"}
+            if order == 1:
+                # smoother: symmetric SOR sweeps (Richardson). GAMG's default, Chebyshev on
+                # Jacobi, rests on an estimate of the largest eigenvalue with a 10 % margin;
+                # on 2 ranks it came out low on Neo-Hookean tangents of the test beam and made
+                # the preconditioner indefinite (CG: KSP_DIVERGED_INDEFINITE_PC) at one
+                # iterate in ten; SOR sweeps need no estimate and took 617 CG iterations for
+                # that solve where Chebyshev with a 30 % margin took 1112
+                values.update({"mg_levels_ksp_type": "richardson", "mg_levels_pc_type": "sor"})
+            else:
+                # P2: Richardson/SOR smoothing makes GAMG fail outright (KSP_DIVERGED_PC_FAILED at
+                # the first iteration, on 1 and 2 ranks); Chebyshev on Jacobi, with a 30 %
+                # margin on its eigenvalue estimate, converges (130 CG iterations, P2 beam)
+                values.update({"mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi",
+                               "mg_levels_ksp_chebyshev_esteig": "0,0.1,0,1.3"})
+        else:
+            values = {"ksp_type": "preonly", "pc_type": "lu",
+                      "pc_factor_mat_solver_type": "mumps" if ranks > 1 else "petsc"}
+        values.update(self.options)
+        return values
 
     @staticmethod
     def converged(ksp: Any) -> bool:
@@ -213,8 +232,8 @@ class PETScSolver:
             M.setNearNullSpace(PETSc.NullSpace().create(vectors=vecs, comm=PETSc.COMM_SELF))
         ksp = self.ksp(PETSc.COMM_SELF)
         ksp.setOperators(M)
-        if rtol is not None:
-            ksp.setTolerances(rtol=float(rtol))
+        if rtol is not None:  # Newton's forcing term may loosen the solve, never tighten it
+            ksp.setTolerances(rtol=max(float(rtol), float(self.rtol)))
         x = np.zeros(n)
         bv = PETSc.Vec().createWithArray(np.ascontiguousarray(b, dtype=float), comm=PETSc.COMM_SELF)
         xv = PETSc.Vec().createWithArray(x, comm=PETSc.COMM_SELF)

@@ -513,11 +513,11 @@ def solve_static(
         from .petsc_solver import PETScSolver
 
         petsc_solver = PETScSolver() if isinstance(linear_solver, str) else cast(PETScSolver, linear_solver)
-        if stability or stabilize:
+        if stability:
             log.info("solve_static with fe.PETScSolver: no stability check on the distributed path")
         return solve_static_distributed(model, petsc_solver, rtol=rtol, max_iter=max_iter, project=project,
                                         initial_load_step=initial_load_step, min_load_step=min_load_step,
-                                        check=check, steps=steps)
+                                        check=check, steps=steps, stabilize=stabilize)
     model.check_supported()
     memory_check = getattr(model, "check_tangent_memory", None)  # before any assembly (ResourceLimit)
     if memory_check is not None:

@@ -273,7 +273,8 @@ class ImplicitEuler(_Implicit):
         scale = G.scale(state, free)
         x1, res = implicit_euler_step(
             model, self.linear_solver, G.y, h, self.mass, dofs, xc, [G.y, x_old], rtol=self.rtol,
-            max_iter=self.max_iter, project=self.project, g_scale=scale if scale > 0 else None)
+            max_iter=self.max_iter, project=self.project, g_scale=scale if scale > 0 else None,
+            energy_roundoff=G.energy_roundoff(G.y), g_floor=G.gradient_roundoff(G.y))
         _count_newton(stats, res)
         if not res.converged:
             return None, f"Newton did not converge ({res.message})"
