@@ -170,20 +170,14 @@ class PETScSolver:
         """The PETSc options (without prefix) of this solver on ``ranks`` ranks, tets of ``order``."""
         if self.preconditioner == "gamg":
             values: dict = {"ksp_type": "cg", "pc_type": "gamg", "ksp_norm_type": "unpreconditioned"}
-            if order == 1:
-                # smoother: symmetric SOR sweeps (Richardson). GAMG's default, Chebyshev on
-                # Jacobi, rests on an estimate of the largest eigenvalue with a 10 % margin;
-                # on 2 ranks it came out low on Neo-Hookean tangents of the test beam and made
-                # the preconditioner indefinite (CG: KSP_DIVERGED_INDEFINITE_PC) at one
-                # iterate in ten; SOR sweeps need no estimate and took 617 CG iterations for
-                # that solve where Chebyshev with a 30 % margin took 1112
-                values.update({"mg_levels_ksp_type": "richardson", "mg_levels_pc_type": "sor"})
-            else:
-                # P2: Richardson/SOR smoothing makes GAMG fail outright (KSP_DIVERGED_PC_FAILED at
-                # the first iteration, on 1 and 2 ranks); Chebyshev on Jacobi, with a 30 %
-                # margin on its eigenvalue estimate, converges (130 CG iterations, P2 beam)
-                values.update({"mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi",
-                               "mg_levels_ksp_chebyshev_esteig": "0,0.1,0,1.3"})
+            # smoother: Chebyshev on Jacobi, with a 30 % margin on its estimate of the largest
+            # eigenvalue. GAMG's default margin (10 %) came out too small on 2 ranks for
+            # Neo-Hookean tangents of the test beam (an indefinite preconditioner: CG stops with
+            # KSP_DIVERGED_INDEFINITE_PC; Newton then answers with GMRES on the same
+            # hierarchy). Symmetric SOR sweeps need no estimate, but fail outright on P2
+            # tangents and on the 150k-tet P1 beam (a zero pivot, KSP_DIVERGED_PC_FAILED)
+            values.update({"mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi",
+                           "mg_levels_ksp_chebyshev_esteig": "0,0.1,0,1.3"})
         else:
             values = {"ksp_type": "preonly", "pc_type": "lu",
                       "pc_factor_mat_solver_type": "mumps" if ranks > 1 else "petsc"}
