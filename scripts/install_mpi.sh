@@ -11,14 +11,16 @@
 #   4. pymetis, from its wheel.
 set -euo pipefail
 VENV=${1:-.venv}
-if ! dpkg -s petsc-dev >/dev/null 2>&1; then
+# your own PETSc: set PETSC_DIR (and PETSC_ARCH) before running this, and apt-get is skipped
+if [ -z "${PETSC_DIR:-}" ] && ! dpkg -s petsc-dev >/dev/null 2>&1; then
     { apt-get update && apt-get install -y --no-install-recommends petsc-dev; } || {
         echo "error: could not install petsc-dev with apt-get (run as root?); the [mpi] extra needs" \
              "PETSc (Debian's petsc-dev, or your own PETSc build with PETSC_DIR/PETSC_ARCH set)" >&2
         exit 1
     }
 fi
-export PETSC_DIR=${PETSC_DIR:-/usr/lib/petscdir/petsc3.18/x86_64-linux-gnu-real}
+# Debian's PETSc: /usr/lib/petsc is its alternatives link to /usr/lib/petscdir/petsc3.18/<arch>-real
+export PETSC_DIR=${PETSC_DIR:-$(readlink -f /usr/lib/petsc)}
 "$VENV/bin/python" -c "import numpy" 2>/dev/null || "$VENV/bin/pip" install "numpy>=1.24"
 "$VENV/bin/pip" install "setuptools>=65" wheel  # bdist_wheel for petsc4py's setup.py
 "$VENV/bin/pip" install --no-build-isolation "petsc4py>=3.18,<3.19"

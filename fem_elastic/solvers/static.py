@@ -515,6 +515,7 @@ def solve_static(
         petsc_solver = PETScSolver() if isinstance(linear_solver, str) else cast(PETScSolver, linear_solver)
         if stability:
             log.info("solve_static with fe.PETScSolver: no stability check on the distributed path")
+        _check_conditioning(model)  # the RoundoffWarning of a nearly incompressible body, as serially
         return solve_static_distributed(model, petsc_solver, rtol=rtol, max_iter=max_iter, project=project,
                                         initial_load_step=initial_load_step, min_load_step=min_load_step,
                                         check=check, steps=steps, stabilize=stabilize)
