@@ -102,8 +102,9 @@ def test_bad_input_is_a_typed_error_naming_the_fix(monkeypatch):
     with pytest.raises(fe.InvalidParameter, match="damping"):
         fe.ImplicitEuler(linear_solver=fe.PETScSolver()).step(m, fe.State.rest(m), 0.01)
     # the launcher started 2 processes but PETSc sees one: PETSc without MPI (or another MPI)
-    from fem_elastic.solvers.petsc_solver import comm_world
+    from fem_elastic.solvers.petsc_solver import comm_world, petsc
 
+    petsc()  # MPI starts here as a one-process singleton, before the launcher's variable is faked
     monkeypatch.setenv("OMPI_COMM_WORLD_SIZE", "2")
     with pytest.raises(fe.MissingDependency, match="built without MPI"):
         comm_world()

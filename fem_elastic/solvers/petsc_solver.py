@@ -37,6 +37,14 @@ _PREFIXES: dict = {}  # options prefix of each distinct solver configuration
 
 def petsc() -> Any:
     """The ``petsc4py.PETSc`` module (initialised), or :class:`MissingDependency` naming the fix."""
+    import os
+
+    if launcher_world()[1] == 1:
+        # one process without mpiexec: Open MPI then starts as a "singleton" and, unless told it
+        # is isolated, forks a supporting daemon (orted) as a child of this process, which a
+        # program that forks or kills its own children (a test runner, a process pool) can take
+        # down with it; we never spawn MPI processes, so no daemon is needed
+        os.environ.setdefault("OMPI_MCA_ess_singleton_isolated", "1")
     try:
         from petsc4py import PETSc  # initialises PETSc (and MPI) on first import
     except ImportError as e:
