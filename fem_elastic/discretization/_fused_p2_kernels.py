@@ -216,11 +216,9 @@ class _P2Geometry:
             raise ValueError(f"the P2 kernels need a space of order 2, got {space.order}")
         nodes = space.element_dofs[0::3] // 3  # (10, ne)
         self.nodes = _frozen(nodes.T, np.int64)
-        Xv = space.X.reshape(-1, 3)
-        x0 = Xv[nodes[0]]
-        Dm = np.stack([Xv[nodes[m]] - x0 for m in (1, 2, 3)], axis=-1)  # (ne, 3, 3), columns = edges
-        # d xi / d x of the affine map xi -> x0 + Dm xi (the rows of Dm^-1 are the P1 gradients)
-        self.Dm_inv = _frozen(np.linalg.inv(Dm), float)
+        # d xi / d x of the element's affine map xi -> x0 + Dm xi: scikit-fem's own inverse
+        # Jacobian (MappingAffine.invA, (3, 3, ne)), not a second inversion of the edge matrices
+        self.Dm_inv = _frozen(np.asarray(space.scalar_basis.mapping.invA).transpose(2, 0, 1), float)
         self.dx = _frozen(space.dx, float)  # (ne, nq)
         points = space.scalar_basis.quadrature[0]  # (3, nq) reference points
         G = np.stack([space.element.lbasis(points, a)[1] for a in range(NLOC)])  # (10, 3, nq)

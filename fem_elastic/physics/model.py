@@ -412,6 +412,12 @@ class Model:
         return WarpedStiffness(self.space, material)
 
     # contact and driven boundaries ---------------------------------------------------
+    @property
+    def has_impulse_response(self) -> bool:
+        """Whether :meth:`respond_contacts` can change x and v (an impulse obstacle or ``contact=``)."""
+        return (any(getattr(o, "method", None) == "impulse" for o in self.obstacles)
+                or (self.contact is not None and self.contact.kind == "impulse"))
+
     def respond_contacts(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Apply the impulse responses: obstacles with ``method="impulse"``, then an
         impulse ``contact=`` (``fe.ImpulseContact``, between bodies and self-contact); (x, v)."""

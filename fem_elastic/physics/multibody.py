@@ -507,6 +507,12 @@ class MultiBody:
             return 1.0
         return float(self.contact.max_step(x, dx))
 
+    @property
+    def has_impulse_response(self) -> bool:
+        """Whether :meth:`respond_contacts` can change x and v (a body's or the bodies' impulses)."""
+        return (any(m.has_impulse_response for m in self.models)
+                or (self.contact is not None and self.contact.kind == "impulse"))
+
     def respond_contacts(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each body's obstacle impulses, then the impulse contact between bodies; returns (x, v)."""
         o = self.dof_offsets

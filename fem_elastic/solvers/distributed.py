@@ -267,43 +267,47 @@ class DistributedProblem:
         d = xo - y.getArray(readonly=True)
         if self.mass == "lumped":
             return 0.5 * float(self.m_owned @ (d * d)) / (k * k)
-        dv = x.duplicate()
-        x.copy(dv)
-        dv.axpy(-1.0, y)
-        Md = dv.duplicate()
-        self.M.mult(dv, Md)
+        Md = self._mass_times_difference(x, y)
         e = 0.5 * float(d @ Md.getArray(readonly=True)) / (k * k)  # owned part; summed by the caller
-        dv.destroy()
         Md.destroy()
         return e
 
+    def _mass_times_difference(self, x: Any, y: Any) -> Any:
+        """``M (x - y)`` (kg m) with the consistent mass, a new distributed vector."""
+        d = x.duplicate()
+        x.copy(d)
+        d.axpy(-1.0, y)
+        Md = d.duplicate()
+        self.M.mult(d, Md)
+        d.destroy()
+        return Md
+
+    def _sum_local(self, values: np.ndarray, out: Any = None) -> Any:
+        """A distributed vector summing every rank's local DOF values (ghosts to their owners)."""
+        v = self.vec() if out is None else out
+        v.set(0.0)
+        self.x_local.getArray()[:] = values
+        self.scatter.scatter(self.x_local, v, addv=self.PETSc.InsertMode.ADD_VALUES,
+                             mode=self.PETSc.ScatterMode.REVERSE)
+        return v
+
+    def body_tangent_times(self, x: Any, d: Any) -> Any:
+        """``K(x) d`` (N) of the body's exact tangent, on every row (held ones too)."""
+        H = self.body.hessian(self.local(x).copy(), project=False)
+        return self._sum_local(H @ self.local(d))
+
     def gradient(self, x: Any, s: float = 1.0, y: Any = None, k: float = 0.0, out: Any = None) -> Any:
         """dG/dx (N) as a distributed vector (held DOFs included: their reactions)."""
-        PETSc = self.PETSc
-        g = self.vec() if out is None else out
-        g.set(0.0)
-        g_local = self.body.gradient(self.local(x))
-        self.x_local.getArray()[:] = g_local
-        self.scatter.scatter(self.x_local, g, addv=PETSc.InsertMode.ADD_VALUES,
-                             mode=PETSc.ScatterMode.REVERSE)
+        g = self._sum_local(self.body.gradient(self.local(x)), out)
         ga = g.getArray()
         ga -= s * self.f_owned
         if y is not None and self.mass == "lumped":
             ga += self.m_owned * (x.getArray(readonly=True) - y.getArray(readonly=True)) / (k * k)
         elif y is not None and self.mass == "consistent":
-            dv = x.duplicate()
-            x.copy(dv)
-            dv.axpy(-1.0, y)
-            Md = self._mult(self.M, dv)
+            Md = self._mass_times_difference(x, y)
             g.axpy(1.0 / (k * k), Md)
-            for v in (dv, Md):
-                v.destroy()
+            Md.destroy()
         return g
-
-    def _mult(self, M, v):
-        out = v.duplicate()
-        M.mult(v, out)
-        return out
 
     def hessian(self, x: Any, project: bool, k: float = 0.0) -> Any:
         """The free-DOF tangent (N/m) with identity rows and columns on held DOFs, assembled."""

@@ -159,30 +159,27 @@ def _direction(problem, ksp, x, g, dx, k, exact, eta, result):
     t0 = time.perf_counter()
     ksp.setOperators(A)
     rtol0 = ksp.getTolerances()[0]
-    ksp.setTolerances(rtol=max(rtol0, eta) if eta else rtol0)  # the forcing term loosens, never tightens
+    rtol = max(rtol0, eta) if eta else rtol0  # the forcing term loosens, never tightens
     rhs = g.duplicate()
     g.copy(rhs)
     rhs.scale(-1.0)
-    dx.set(0.0)
-    ksp.solve(rhs, dx)
-    its = int(ksp.getIterationNumber())
-    reason = int(ksp.getConvergedReason())
-    result.linear_iterations += its
-    result.linear_solves += 1
+
+    def solve_with(krylov):
+        krylov.setTolerances(rtol=rtol)
+        dx.set(0.0)
+        krylov.solve(rhs, dx)
+        result.linear_iterations += krylov.getIterationNumber()
+        result.linear_solves += 1
+        return int(krylov.getIterationNumber()), int(krylov.getConvergedReason())
+
+    its, reason = solve_with(ksp)
     result.linear_setups += 1  # the new tangent's values: PETSc sets the preconditioner up again
     if reason == _KSP_DIVERGED_INDEFINITE[0] and not exact:
         # the projected tangent is positive semi-definite: the preconditioner is what failed
         # (Chebyshev smoothing on a poor eigenvalue estimate); GMRES, which does not need a
         # positive definite preconditioner, solves with the same set-up hierarchy
         log.info("CG met an indefinite preconditioner on the projected tangent; GMRES instead")
-        gmres = _gmres(ksp)
-        gmres.setTolerances(rtol=max(rtol0, eta) if eta else rtol0)
-        dx.set(0.0)
-        gmres.solve(rhs, dx)
-        its = int(gmres.getIterationNumber())
-        reason = int(gmres.getConvergedReason())
-        result.linear_iterations += its
-        result.linear_solves += 1
+        its, reason = solve_with(_gmres(ksp))
     ksp.setTolerances(rtol=rtol0)
     rhs.destroy()
     result.seconds["solve"] += time.perf_counter() - t0
@@ -225,23 +222,10 @@ def destroy_ksp(ksp) -> None:
     ksp.destroy()
 
 
-def _held_positions(model, s: float) -> tuple[np.ndarray, np.ndarray]:
-    held = model.held_dofs
-    values = model.X[held].copy()
-    presc = np.isin(held, model.prescribed_dofs)
-    if presc.any():
-        order = np.searchsorted(model.prescribed_dofs, held[presc])
-        values[presc] += s * model.prescribed_values[order]
-    return held, values
-
-
-def _set_held(problem, x, held, values):
-    """Put the held DOFs' values (model numbering) into the distributed vector x."""
+def _set_held(problem, x, x_full):
+    """Put the held DOFs' values of the replicated model vector ``x_full`` into the distributed ``x``."""
     mask = problem.held_mask[problem.owned_old]
-    if mask.any():
-        full = np.zeros(problem.ndofs)
-        full[held] = values
-        x.getArray()[mask] = full[problem.owned_old][mask]
+    x.getArray()[mask] = x_full[problem.owned_old[mask]]
 
 
 def solve_static_distributed(model, solver: PETScSolver, *, rtol: float = 1e-8, max_iter: int = 30,
@@ -264,7 +248,7 @@ def solve_static_distributed(model, solver: PETScSolver, *, rtol: float = 1e-8, 
     t_start = time.perf_counter()
     comm = comm_world()
     problem = distributed_problem(model, comm, model.held_dofs, mass=None)
-    ksp = solver.ksp(comm, model.space.order)
+    ksp = solver.ksp(comm)
     try:
         return _load_path(model, problem, ksp, t_start, rtol=rtol, max_iter=max_iter, project=project,
                           initial_load_step=initial_load_step, min_load_step=min_load_step,
@@ -276,7 +260,7 @@ def solve_static_distributed(model, solver: PETScSolver, *, rtol: float = 1e-8, 
 def _load_path(model, problem, ksp, t_start, *, rtol, max_iter, project, initial_load_step,
                min_load_step, check, steps):
     """The load steps of :func:`solve_static_distributed` (its KSP made and destroyed there)."""
-    from .static import EquilibriumPoint, StaticResult, _vertex_forces
+    from .static import EquilibriumPoint, StaticResult, _vertex_forces, held_at
 
     x = problem.to_vec(model.X)
     # the problem's force scale: the load, plus what the prescribed displacements exert at rest
@@ -286,15 +270,14 @@ def _load_path(model, problem, ksp, t_start, *, rtol, max_iter, project, initial
     if model.prescribed_dofs.size and np.any(model.prescribed_values != 0.0):
         d = np.zeros(model.ndofs)
         d[model.prescribed_dofs] = model.prescribed_values
-        K0 = _rest_stiffness_full(problem)
-        dv, Kd = problem.to_vec(d), problem.vec()
-        K0.mult(dv, Kd)
+        dv = problem.to_vec(d)
+        Kd = problem.body_tangent_times(x, dv)  # K_0 d on every row, held too
         kd = Kd.getArray(readonly=True)[problem.free_owned]
         u_scale = math.sqrt(problem.allsum(float(kd @ kd)))
         if u_scale == 0.0:  # no free DOF feels it: the forces on all (as the serial solve)
             ka = Kd.getArray(readonly=True)
             u_scale = math.sqrt(problem.allsum(float(ka @ ka))) or 1.0
-        for v in (dv, Kd, K0):
+        for v in (dv, Kd):
             v.destroy()
     g_scale_full = f_scale + u_scale
     seconds = {"linearize": 0.0, "solve": 0.0, "line_search": 0.0, "stability": 0.0}
@@ -326,7 +309,7 @@ def _load_path(model, problem, ksp, t_start, *, rtol, max_iter, project, initial
             target = min(target, (math.floor(s * steps * (1 + 1e-12)) + 1) / steps)
         x_try = x.duplicate()
         x.copy(x_try)
-        _set_held(problem, x_try, *_held_positions(model, target))
+        _set_held(problem, x_try, held_at(model, model.X, target))
         res = minimize(problem, ksp, x_try, s=target, rtol=rtol, g_scale=target * g_scale_full,
                        max_iter=max_iter, min_iter=1, project=project)
         total.iterations += res.iterations
@@ -367,27 +350,15 @@ def _load_path(model, problem, ksp, t_start, *, rtol, max_iter, project, initial
     return total
 
 
-def _rest_stiffness_full(problem) -> Any:
-    """K_0 with every row (held ones too), for the prescribed displacements' force scale."""
-    from .distributed import DistributedProblem
-
-    unheld = DistributedProblem(problem.model, problem.comm, np.zeros(0, dtype=np.int64))
-    X = unheld.to_vec(problem.model.X)
-    K0 = unheld.hessian(X, project=False).duplicate(copy=True)
-    X.destroy()
-    unheld.destroy()
-    return K0
-
-
 def implicit_euler_step(model, solver: PETScSolver, y: np.ndarray, h: float, mass: str,
-                        held: np.ndarray, held_values: np.ndarray, starts: list, *,
+                        held: np.ndarray, starts: list, *,
                         rtol: float, max_iter: int, project: bool, g_scale: float | None,
                         energy_roundoff: float | None = None, g_floor: float | None = None):
     """Minimise ``|x - y|_M^2 / (2 h^2) + Pi(x)`` across the ranks; (x, result).
 
     ``starts`` are first guesses (replicated model vectors, e.g. the inertial
     prediction and the old positions): Newton starts from the one with the lowest
-    G. ``held`` DOFs sit at ``held_values``. Every rank passes the same arrays
+    G; each holds the ``held`` DOFs at their values already. Every rank passes the same arrays
     and gets the same minimiser back.
     """
     check_distributable(model, "fe.ImplicitEuler")
@@ -397,13 +368,12 @@ def implicit_euler_step(model, solver: PETScSolver, y: np.ndarray, h: float, mas
     if ksp is None or problem.__dict__.get("_ksp_solver") is not solver:
         if ksp is not None:
             destroy_ksp(ksp)
-        ksp = problem.__dict__["_ksp"] = solver.ksp(comm, model.space.order)
+        ksp = problem.__dict__["_ksp"] = solver.ksp(comm)
         problem.__dict__["_ksp_solver"] = solver
     yv = problem.to_vec(y)
     best, x = math.inf, cast(Any, None)
     for start in starts:
         xs = problem.to_vec(start)
-        _set_held(problem, xs, held, held_values)
         e = problem.energy(xs, 1.0, yv, h)
         if x is None or e < best:
             if x is not None:

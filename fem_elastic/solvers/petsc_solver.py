@@ -152,15 +152,15 @@ class PETScSolver:
             raise InvalidParameter(f"options must be a dict of PETSc options, got {self.options!r}.")
 
     # --- the KSP, set up from this solver's choices -------------------------------------
-    def ksp(self, comm: Any, order: int = 1) -> Any:
-        """A new PETSc KSP on ``comm`` configured as this solver says, for tets of ``order``.
+    def ksp(self, comm: Any) -> Any:
+        """A new PETSc KSP on ``comm`` configured as this solver says.
 
         The settings go through PETSc's options database under a prefix of their own,
         one per distinct configuration (not per KSP: PETSc 3.18 holds at most 512
         options, and a sweep makes thousands of KSPs).
         """
         PETSc = petsc()
-        values = self.settings(comm.getSize(), order)
+        values = self.settings(comm.getSize())
         key = tuple(sorted((k, str(v)) for k, v in values.items()))
         prefix = _PREFIXES.get(key)
         opts = PETSc.Options()
@@ -174,8 +174,8 @@ class PETScSolver:
         ksp.setTolerances(rtol=float(self.rtol), atol=0.0, max_it=int(self.max_it))
         return ksp
 
-    def settings(self, ranks: int, order: int = 1) -> dict:
-        """The PETSc options (without prefix) of this solver on ``ranks`` ranks, tets of ``order``."""
+    def settings(self, ranks: int) -> dict:
+        """The PETSc options (without prefix) of this solver on ``ranks`` ranks (P1 and P2 alike)."""
         if self.preconditioner == "gamg":
             values: dict = {"ksp_type": "cg", "pc_type": "gamg", "ksp_norm_type": "unpreconditioned"}
             # smoother: Chebyshev on Jacobi, with a 30 % margin on its estimate of the largest
@@ -191,11 +191,6 @@ class PETScSolver:
                       "pc_factor_mat_solver_type": "mumps" if ranks > 1 else "petsc"}
         values.update(self.options)
         return values
-
-    @staticmethod
-    def converged(ksp: Any) -> bool:
-        """Whether the last ``ksp.solve`` met its tolerance."""
-        return int(ksp.getConvergedReason()) > 0
 
     def solve(self, A: sp.spmatrix, b: np.ndarray, near_null: np.ndarray | None = None,
               rtol: float | None = None) -> LinearSolve:
@@ -241,11 +236,10 @@ class PETScSolver:
         xv = PETSc.Vec().createWithArray(x, comm=PETSc.COMM_SELF)
         ksp.solve(bv, xv)
         its = int(ksp.getIterationNumber())
-        ok = self.converged(ksp)
-        reason = int(ksp.getConvergedReason())
+        reason = int(ksp.getConvergedReason())  # > 0: converged
         for obj in (ksp, M, bv, xv):
             obj.destroy()
-        if not ok:
+        if reason <= 0:
             raise LinearSolverFailed(
                 f"PETSc {self.preconditioner} did not converge (KSP reason {reason}) in {its} "
                 "iterations: try preconditioner='lu', a larger max_it, or check that the "

@@ -311,6 +311,15 @@ def _check_stability(stability):
     )
 
 
+def held_at(model, x: np.ndarray, s: float) -> np.ndarray:
+    """A copy of ``x`` with the model's prescribed DOFs at ``X + s u_p`` (load factor ``s``)."""
+    x = x.copy()
+    presc = model.prescribed_dofs
+    if presc.size:
+        x[presc] = model.X[presc] + s * model.prescribed_values
+    return x
+
+
 class _Problem:
     """The static problem of a model at load factor s: held values, energy, reactions."""
 
@@ -333,10 +342,7 @@ class _Problem:
 
     def held(self, x: np.ndarray, s: float) -> np.ndarray:
         """x with the prescribed DOFs at ``X + s u_p``."""
-        x = x.copy()
-        if self.presc.size:
-            x[self.presc] = self.model.X[self.presc] + s * self.u_p
-        return x
+        return held_at(self.model, x, s)
 
     def point(self, x, s, iterations=0) -> EquilibriumPoint:
         model = self.model

@@ -22,7 +22,6 @@ grows faster than n).
 from __future__ import annotations
 
 import contextlib
-import importlib.util
 import logging
 import numbers
 import statistics
@@ -39,7 +38,7 @@ from ..geometry.mesh import beam_mesh
 from ..materials import NeoHookean
 from ..physics.elastic_body import ElasticBody
 from ..physics.model import Model
-from ..solvers.linear_solvers import AMGSolver, DirectSolver
+from ..solvers.linear_solvers import AMGSolver, DirectSolver, _have_pyamg
 
 __all__ = ["FULL_SIZES", "OPERATIONS", "QUICK_SIZES", "ScalingResult", "beam_cells", "bent_state",
            "fit_power_law", "measure_scaling"]
@@ -136,7 +135,8 @@ class ScalingResult:
         Per operation, per size, the seconds of each timed call (a sample of a batch is
         the batch's time divided by its calls).
     fused : bool
-        Whether the fused numba kernels ran (numba importable, ``FEM_ELASTIC_NUMBA`` not 0).
+        Whether the fused numba kernels ran (numba importable, ``FEM_ELASTIC_NUMBA`` not 0, and
+        kernels for the material).
     clock : {"wall", "process"}
         What was timed: wall time, or the process's CPU time (see :func:`measure_scaling`).
     newton_iterations, linear_iterations : numpy.ndarray
@@ -395,7 +395,7 @@ def measure_scaling(n_tets=FULL_SIZES, operations=OPERATIONS, repeats: int = 5,
         implicit_repeats, "implicit_repeats", 1)
     material = NeoHookean(E=1.0e7, nu=0.45) if material is None else material
     if linear_solver is None:
-        linear_solver = AMGSolver() if importlib.util.find_spec("pyamg") else DirectSolver()
+        linear_solver = AMGSolver() if _have_pyamg() else DirectSolver()
     if blas_threads is not None:
         blas_threads = _check_count(blas_threads, "blas_threads", 1)
     if clock not in _CLOCKS:
@@ -422,5 +422,7 @@ def measure_scaling(n_tets=FULL_SIZES, operations=OPERATIONS, repeats: int = 5,
             logger.info("scaling: %d tets, %d DOFs: %s", n_el[-1], n_dofs[-1],
                         ", ".join(f"{op} {statistics.median(times[op]) * 1e3:.2f} ms"
                                   for op in times))
-    return ScalingResult(np.array(n_el), np.array(n_dofs), tuple(cells), samples, fused.available(),
+    # whether the fused kernels ran: for this material on these spaces, not merely numba's presence
+    ran_fused = fused.kernels_for(material, model.space) is not None
+    return ScalingResult(np.array(n_el), np.array(n_dofs), tuple(cells), samples, ran_fused,
                          clock, np.array(newton, dtype=int), np.array(linear, dtype=int))

@@ -145,7 +145,7 @@ class _Work:
         #: step from it skips check_state's finiteness scan (the update tested it in its pass)
         self.finite_state = None
         #: whether impulse contacts change x1, v1 after the update (then it cannot vouch for them)
-        self.responds = _has_impulse_response(model)
+        self.responds = model.has_impulse_response
         #: (potential, factor) of the loads and contacts, which :meth:`gradient` adds to the body's
         #: fused force: listed at its first use (a single-body Model's path only)
         self.other_terms: list | None = None
@@ -176,17 +176,6 @@ class _Work:
         for term, c in self.other_terms:
             out += c * term.gradient(x)
         return out
-
-
-def _has_impulse_response(model) -> bool:
-    """Whether ``model.respond_contacts`` may change x, v: an impulse obstacle or contact on the
-    model or, for a multibody scene, on one of its bodies."""
-    for m in (model, *getattr(model, "models", ())):
-        if any(getattr(o, "method", None) == "impulse" for o in getattr(m, "obstacles", ())):
-            return True
-        if getattr(getattr(m, "contact", None), "kind", None) == "impulse":
-            return True
-    return False
 
 
 def _update_kernel():

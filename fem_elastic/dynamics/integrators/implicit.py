@@ -268,11 +268,13 @@ class ImplicitEuler(_Implicit):
 
         free, dofs, xc, vc = self._start(model, state, h)
         G = self._objective(model, state, h)
+        x0 = self._prediction(G, state, h)  # the two first guesses, as serially
+        x0[dofs] = xc
         x_old = state.x.copy()
         x_old[dofs] = xc
         scale = G.scale(state, free)
         x1, res = implicit_euler_step(
-            model, self.linear_solver, G.y, h, self.mass, dofs, xc, [G.y, x_old], rtol=self.rtol,
+            model, self.linear_solver, G.y, h, self.mass, dofs, [x0, x_old], rtol=self.rtol,
             max_iter=self.max_iter, project=self.project, g_scale=scale if scale > 0 else None,
             energy_roundoff=G.energy_roundoff(G.y), g_floor=G.gradient_roundoff(G.y))
         _count_newton(stats, res)
