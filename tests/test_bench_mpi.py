@@ -1,47 +1,22 @@
 """``scripts/bench_mpi.py --quick`` runs on 2 MPI ranks and prints sane numbers (issue 21, item 4).
 
-Skipped only where there is no ``mpiexec`` or no petsc4py, and then only when
-``FEM_ELASTIC_REQUIRE_MPI`` is not ``1`` (CI sets it: there a missing MPI stack fails).
+Skipped without the MPI backend, except under ``FEM_ELASTIC_REQUIRE_MPI=1`` (CI): there it fails
+(tests/mpi_support.py, shared with the other MPI tests).
 """
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import os
-import shutil
-import subprocess
-import sys
-from pathlib import Path
 
-import pytest
+from mpi_support import ROOT, require_mpi, run_mpi
 
-ROOT = Path(__file__).resolve().parent.parent
 PHASES = ("model", "partition", "setup", "assembly", "pc_setup", "solve", "solve_static")
 
 
-def _mpi_missing() -> str | None:
-    if shutil.which("mpiexec") is None:
-        return "mpiexec is not on PATH"
-    if importlib.util.find_spec("petsc4py") is None:
-        return "petsc4py is not importable"
-    return None
-
-
 def test_bench_mpi_quick_two_ranks(tmp_path):
-    missing = _mpi_missing()
-    if missing:
-        if os.environ.get("FEM_ELASTIC_REQUIRE_MPI") == "1":
-            pytest.fail(f"FEM_ELASTIC_REQUIRE_MPI=1 but {missing}: run scripts/install_mpi.sh")
-        pytest.skip(missing)
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               OMPI_MCA_btl_vader_single_copy_mechanism="none")
+    require_mpi()
     out = tmp_path / "bench.json"
-    proc = subprocess.run(
-        ["mpiexec", "-n", "2", "--oversubscribe", sys.executable, str(ROOT / "scripts" / "bench_mpi.py"),
-         "--quick", "--json", str(out)],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=120,
-    )
+    proc = run_mpi(2, ["python", ROOT / "scripts" / "bench_mpi.py", "--quick", "--json", out], timeout=120)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     lines = proc.stdout.splitlines()
     # only rank 0 prints: one header line
