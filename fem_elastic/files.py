@@ -62,8 +62,8 @@ def _atomic_write(path: Path, write) -> Path:
         raise
     except OSError as exc:
         raise write_failed(path, exc) from exc
-    os.close(fd)
-    try:
+    try:  # from here on the temporary file is removed whatever stops the write (Ctrl-C too)
+        os.close(fd)
         write(tmp)
         with open(tmp, "rb+") as fh:
             fh.flush()
