@@ -273,7 +273,7 @@ def _deformation_gradient(x, X, nodes, Dm_inv, e):
 def _deformation_gradient9(x, X, nodes, D, e):
     """:func:`_deformation_gradient` with ``D = Dm_inv.reshape(ne, 9)``: the same operations
     (the same bits), Dm^-1 read as nine scalars rather than through a 3x3 view per element
-    (see :func:`_gradient_range`; inlined, so the caller's own reads of D are the same loads)."""
+    (inlined into the energy loop; the force loop is :mod:`._fused_gradient_kernels`)."""
     k0, k1, k2, k3 = 3 * nodes[e, 0], 3 * nodes[e, 1], 3 * nodes[e, 2], 3 * nodes[e, 3]
     u0, u1, u2 = x[k0] - X[k0], x[k0 + 1] - X[k0 + 1], x[k0 + 2] - X[k0 + 2]  # as _displacements
     a0, a1, a2 = x[k1] - X[k1] - u0, x[k1 + 1] - X[k1 + 1] - u1, x[k1 + 2] - X[k1 + 2] - u2
@@ -293,75 +293,6 @@ def _deformation_gradient9(x, X, nodes, D, e):
         a2 * d01 + b2 * d11 + c2 * d21,
         a2 * d02 + b2 * d12 + c2 * d22 + 1.0,
     )
-
-
-@_jit
-def _gradient_range(x, X, nodes, D, V, kind, prm, start, stop, out):
-    """out += dE_e/dx of the elements start:stop: g_ai += V P_ij dN_aj (the gradient loops' body).
-
-    ``D`` is ``Dm_inv.reshape(ne, 9)``: Dm^-1 read as nine scalars per
-    element (F by the inlined :func:`_deformation_gradient9`). Measured on the
-    153,600-tet beam: 9-11 ms, against 13-17 ms for the same loop through a
-    3x3 view of Dm_inv per element or an element function not inlined; the
-    body written out in the loop measured the same as this (9.9 ms, same bits).
-    """
-    for e in range(start, stop):
-        F = _deformation_gradient9(x, X, nodes, D, e)
-        k0, k1, k2, k3 = 3 * nodes[e, 0], 3 * nodes[e, 1], 3 * nodes[e, 2], 3 * nodes[e, 3]
-        d00, d01, d02 = D[e, 0], D[e, 1], D[e, 2]
-        d10, d11, d12 = D[e, 3], D[e, 4], D[e, 5]
-        d20, d21, d22 = D[e, 6], D[e, 7], D[e, 8]
-        p = P(kind, F, prm)
-        v = V[e]
-        for i in range(3):
-            q0, q1, q2 = p[3 * i] * v, p[3 * i + 1] * v, p[3 * i + 2] * v
-            f1 = q0 * d00 + q1 * d01 + q2 * d02
-            f2 = q0 * d10 + q1 * d11 + q2 * d12
-            f3 = q0 * d20 + q1 * d21 + q2 * d22
-            out[k1 + i] += f1
-            out[k2 + i] += f2
-            out[k3 + i] += f3
-            out[k0 + i] -= f1 + f2 + f3
-
-
-@_jit
-def gradient_p1(x, X, nodes, Dm_inv, V, kind, prm, out):
-    """out = dE/dx: for each tet, g_ai += V P_ij dN_aj, scattered as it is computed.
-
-    Parameters: x, X ``(ndofs,)``; nodes ``(ne, 4)`` vertex indices; Dm_inv
-    ``(ne, 3, 3)``, ``Dm_inv[e, b, j] = dN_{b+1, j}`` (the gradients of the
-    shape functions of nodes 1-3; node 0's is minus their sum); V ``(ne,)``
-    volumes; out ``(ndofs,)``, overwritten.
-    """
-    out[:] = 0.0
-    D = Dm_inv.reshape((Dm_inv.shape[0], 9))  # a view (Dm_inv is C-contiguous)
-    _gradient_range(x, X, nodes, D, V, kind, prm, 0, nodes.shape[0], out)
-
-
-# numba threads (NUMBA_NUM_THREADS): one parallel region per call, over vertex-disjoint parts
-
-
-@_pjit
-def gradient_p1_parts(x, X, nodes, Dm_inv, V, kind, prm, part_start, out):
-    """:func:`gradient_p1` on numba's threads: the interiors of P parts in parallel, then the seams.
-
-    The elements are given grouped: part p's interior is
-    ``part_start[p]:part_start[p + 1]`` (p < P = ``len(part_start) - 2``),
-    elements none of whose vertices another part touches, so the parts
-    scatter into disjoint entries of ``out`` without atomics; the seams (the
-    elements with a vertex shared between parts) are the last group,
-    ``part_start[P]:part_start[P + 1]``, summed serially afterwards. One
-    thread per part and a single synchronisation: a loaded machine that
-    deschedules a thread costs one wait, not one per colour. Each group keeps
-    the element order, so a vertex inside a part gets its contributions in
-    the serial loop's order; a seam vertex gets its seam elements' last.
-    """
-    out[:] = 0.0
-    D = Dm_inv.reshape((Dm_inv.shape[0], 9))
-    n_parts = part_start.shape[0] - 2
-    for p in numba.prange(n_parts):
-        _gradient_range(x, X, nodes, D, V, kind, prm, part_start[p], part_start[p + 1], out)
-    _gradient_range(x, X, nodes, D, V, kind, prm, part_start[n_parts], part_start[n_parts + 1], out)
 
 
 @_jit
@@ -652,7 +583,7 @@ def warped_apply_p1(x, X, v, nodes, Dm_inv, V, prm, out):
     ``sigma_lin(G) = mu (G + G^T) + lam tr(G) I``, and for ``w_a = R^T v_a``
     ``grad w = R^T L``, ``L = grad v``. So per element: R the polar rotation
     of F (:func:`polar_rotation`), ``P = R sigma_lin(R^T L)`` and
-    ``out_a += V P dN_a``, scattered as :func:`gradient_p1` does. (The 12x12
+    ``out_a += V P dN_a``, scattered as :func:`._fused_gradient_kernels.gradient_p1` does. (The 12x12
     K_e would be 1.2 kB per element to stream from memory: measured, that
     path took ~1.6x as long.)
 

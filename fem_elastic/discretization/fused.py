@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 import weakref
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable
@@ -248,7 +249,7 @@ class _P1Geometry:
 
 
 class _PartitionedP1:
-    """The P1 geometry regrouped for :func:`._fused_kernels.gradient_p1_parts`.
+    """The P1 geometry regrouped for :func:`._fused_gradient_kernels.gradient_p1_parts`.
 
     The elements are cut into ``n_parts`` slabs of equal element counts
     across the longest side of the body's bounding box (by the rank of their
@@ -321,6 +322,12 @@ class FusedP1:
             raise ValueError(f"the fused kernels are for P1 tets, got order {space.order}")
         name, params = _REGISTRY[type(material)]
         self._k = _kernels()
+        from . import _fused_gradient_kernels  # numba is importable: _kernels() loaded it
+
+        self._g = _fused_gradient_kernels
+        # the force loop's work buffers, one row per numba thread, one set per calling thread
+        # (a FusedP1 may be shared by Python threads: solve_static in a pool)
+        self._work = threading.local()
         self.kind = getattr(self._k, name.upper())
         self.prm = params(material)
         entry = _cache.get(space)
@@ -352,12 +359,16 @@ class FusedP1:
         g = self.geo
         out = _out_array(out, g.ndofs)
         n_threads = _threads(g.nodes.shape[0])
+        work = getattr(self._work, "buffers", None)
+        if work is None or work.shape[0] < n_threads:
+            work = self._work.buffers = np.empty((n_threads, self._g.WORK))
         if n_threads > 1:
             c = g.parts(n_threads)
-            self._k.gradient_p1_parts(self._x(x), g.X, c.nodes, c.Dm_inv, c.V, self.kind,
-                                      self.prm, c.part_start, out)
+            self._g.gradient_p1_parts(self._x(x), g.X, c.nodes, c.Dm_inv, c.V, self.kind,
+                                      self.prm, c.part_start, out, work)
         else:
-            self._k.gradient_p1(self._x(x), g.X, g.nodes, g.Dm_inv, g.V, self.kind, self.prm, out)
+            self._g.gradient_p1(self._x(x), g.X, g.nodes, g.Dm_inv, g.V, self.kind, self.prm, out,
+                                work)
         return out
 
     def hessian(self, x: np.ndarray, pattern, project: bool = False):
