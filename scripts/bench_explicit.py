@@ -19,7 +19,9 @@ thread count of ``--threads`` (default 1 and 2):
   step remembers of its last State), so that only the update, the checks and the State are
   timed;
 - the gradients alone: before, today's serial kernel (``FEM_ELASTIC_NUMBA_THREADS=0``:
-  the same bits as before, Dm^-1 read as nine scalars), the threaded kernel.
+  the blocked loop of ``discretization/_fused_gradient_kernels.py``, 64 elements at a
+  time with F, P and the nodal forces vectorised; the same bits as before), the
+  threaded kernel (the same loop on each part of the mesh).
 
 The reference is the 7.7 ms per step of the issue's table (Newton-physics/warp CPU);
 the goal is <= 0.8 x that. BLAS is pinned to one thread. The machine's load matters:

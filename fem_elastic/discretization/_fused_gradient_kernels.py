@@ -4,8 +4,9 @@
 (conventions: :mod:`._fused_kernels`). The elements are taken
 :data:`BLOCK` at a time, in five passes over the block:
 
-1. gather (scalar): the edge displacements ``Ds`` (9 numbers), Dm^-1 (9) and V
-   of each element into structure-of-arrays work buffers;
+1. gather (scalar): the edge displacements ``Ds`` (9 numbers) of each element
+   into a structure-of-arrays work buffer; Dm^-1 and V are stored in that layout
+   once (:func:`blocks`), so the loop reads them in place;
 2. F and J (vectorised);
 3. ln J for the Neo-Hookean material (scalar: numba has no vector ``log``
    without Intel's SVML);
@@ -13,7 +14,7 @@
 5. scatter (scalar), element by element in the serial order.
 
 Passes 2 and 4 are plain loops over the block of unit stride with compile-time
-row offsets (``row * BLOCK + j``) in four distinct buffers, which LLVM turns
+row offsets (``row * BLOCK + j``) in three distinct buffers, which LLVM turns
 into AVX code; the element-at-a-time loop it replaces (``_fused_kernels``
 before issue 19's second pass) could not be vectorised because of the gather
 and the scatter inside it. Each value is computed with the same operations in
@@ -23,7 +24,9 @@ reassociation and no FMA contraction), and the scatter keeps the element order:
 ``tests/test_explicit_fast.py``.
 
 Measured on the 153,600-tet beam, one thread, same process: 6.3 ms against
-9.2 ms for the element-at-a-time loop (``scripts/bench_explicit.py``).
+9.2 ms for the element-at-a-time loop with Dm^-1 and V copied into the block
+by the gather, and a further 1.1 ms less with them stored blocked
+(``scripts/bench_explicit.py``).
 """
 
 from __future__ import annotations
@@ -43,15 +46,48 @@ from ._fused_kernels import (
     stvk_P,
 )
 
-#: Elements per block: the work buffers (:data:`WORK` doubles, 15 KiB) stay in L1.
+#: Elements per block: the work buffers (:data:`WORK` doubles, 10 KiB) and the block of
+#: Dm^-1 and V (5 KiB) stay in L1.
 BLOCK = 64
-#: Doubles of work buffer per thread: Ds then forces (9 rows), Dm^-1 (9), F, J, ln J (11), V (1).
-WORK = 30 * BLOCK
+#: Doubles of work buffer per thread: Ds then forces (9 rows), F, J, ln J (11).
+WORK = 20 * BLOCK
+#: Rows of a block of the stored geometry: Dm^-1 row by row (9), V (1).
+ROWS = 10
+
+
+def blocks(Dm_inv: np.ndarray, V: np.ndarray, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Dm^-1 and V of the ranges ``starts[r]:starts[r + 1]`` in the kernels' block layout.
+
+    Each range is cut into blocks of :data:`BLOCK` elements from its own start
+    (the last one padded with zeros); block b is row ``DB[b]``, holding
+    ``Dm_inv[e].ravel()[k]`` at ``k * BLOCK + j`` and ``V[e]`` at
+    ``9 * BLOCK + j`` for the element e = (its range's start) + (block's offset) + j.
+
+    Returns
+    -------
+    DB : ndarray, ``(n_blocks, ROWS * BLOCK)``
+        72 + 8 bytes per element, plus the padding.
+    first_block : ndarray of int64, ``(len(starts),)``
+        The block of each range's first element; the last entry is ``n_blocks``.
+    """
+    starts = np.asarray(starts, dtype=np.int64)
+    counts = -(-np.diff(starts) // BLOCK)
+    first_block = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+    DB = np.zeros((int(first_block[-1]), ROWS, BLOCK))
+    D = Dm_inv.reshape(-1, 9)
+    for r in range(len(starts) - 1):
+        a, b = int(starts[r]), int(starts[r + 1])
+        n = b - a
+        slots = np.arange(n)
+        blk, j = first_block[r] + slots // BLOCK, slots % BLOCK
+        DB[blk, :9, j] = D[a:b]
+        DB[blk, 9, j] = V[a:b]
+    return DB.reshape(len(DB), ROWS * BLOCK), first_block
 
 
 @_jit
-def _gather(x, X, nodes, D, V, s, n, A, Dd, Vb):
-    """Block pass 1: Ds of u = x - X (row-major 3x3: A[3 c + i] = u_{c+1, i} - u_{0, i}), Dm^-1, V."""
+def _gather(x, X, nodes, s, n, A):
+    """Block pass 1: Ds of u = x - X (row-major 3x3: A[3 c + i] = u_{c+1, i} - u_{0, i})."""
     for j in range(n):
         e = s + j
         k0, k1, k2, k3 = 3 * nodes[e, 0], 3 * nodes[e, 1], 3 * nodes[e, 2], 3 * nodes[e, 3]
@@ -65,9 +101,6 @@ def _gather(x, X, nodes, D, V, s, n, A, Dd, Vb):
         A[6 * BLOCK + j] = x[k3] - X[k3] - u0
         A[7 * BLOCK + j] = x[k3 + 1] - X[k3 + 1] - u1
         A[8 * BLOCK + j] = x[k3 + 2] - X[k3 + 2] - u2
-        for k in range(9):
-            Dd[k * BLOCK + j] = D[e, k]
-        Vb[j] = V[e]
 
 
 @_jit
@@ -135,7 +168,7 @@ def _store_force(p, v, j, Dd, A):
 
 
 @_jit
-def _forces(kind, prm, n, Fb, Dd, Vb, A):
+def _forces(kind, prm, n, Fb, Dd, A):
     """Block pass 4: the nodal forces of nodes 1-3 into A (vectorised; one loop per material)."""
     if kind == NEOHOOKEAN:
         mu, lam = prm[0], prm[1]
@@ -150,16 +183,16 @@ def _forces(kind, prm, n, Fb, Dd, Vb, A):
             p = (mu * f0 + c * k0, mu * f1 + c * k1, mu * f2 + c * k2,
                  mu * f3 + c * k3, mu * f4 + c * k4, mu * f5 + c * k5,
                  mu * f6 + c * k6, mu * f7 + c * k7, mu * f8 + c * k8)
-            _store_force(p, Vb[j], j, Dd, A)
+            _store_force(p, Dd[9 * BLOCK + j], j, Dd, A)
     elif kind == LINEAR:
         for j in range(n):
-            _store_force(linear_P(_load_F(Fb, j), prm), Vb[j], j, Dd, A)
+            _store_force(linear_P(_load_F(Fb, j), prm), Dd[9 * BLOCK + j], j, Dd, A)
     elif kind == STVK:
         for j in range(n):
-            _store_force(stvk_P(_load_F(Fb, j), prm), Vb[j], j, Dd, A)
+            _store_force(stvk_P(_load_F(Fb, j), prm), Dd[9 * BLOCK + j], j, Dd, A)
     else:
         for j in range(n):
-            _store_force(stable_neohookean_P(_load_F(Fb, j), prm), Vb[j], j, Dd, A)
+            _store_force(stable_neohookean_P(_load_F(Fb, j), prm), Dd[9 * BLOCK + j], j, Dd, A)
 
 
 @_jit
@@ -179,41 +212,44 @@ def _scatter(nodes, s, n, A, out):
 
 
 @_jit
-def gradient_range(x, X, nodes, D, V, kind, prm, start, stop, out, w):
-    """out += dE_e/dx of the elements start:stop, BLOCK at a time (``D = Dm_inv.reshape(ne, 9)``).
+def gradient_range(x, X, nodes, DB, b0, kind, prm, start, stop, out, w):
+    """out += dE_e/dx of the elements start:stop, BLOCK at a time.
 
-    ``w`` is a work buffer of :data:`WORK` doubles (one per thread), so no call allocates.
+    ``DB[b0 + i]`` is the stored Dm^-1 and V of the block starting at element
+    ``start + i * BLOCK`` (:func:`blocks`); ``w`` is a work buffer of
+    :data:`WORK` doubles (one per thread), so no call allocates.
     """
     A = w[:9 * BLOCK]
-    Dd = w[9 * BLOCK:18 * BLOCK]
-    Fb = w[18 * BLOCK:29 * BLOCK]
-    Vb = w[29 * BLOCK:30 * BLOCK]
+    Fb = w[9 * BLOCK:20 * BLOCK]
+    b = b0
     for s in range(start, stop, BLOCK):
         n = min(BLOCK, stop - s)
-        _gather(x, X, nodes, D, V, s, n, A, Dd, Vb)
+        Dd = DB[b]
+        _gather(x, X, nodes, s, n, A)
         _F_and_J(n, A, Dd, Fb)
         if kind == NEOHOOKEAN:
             _lnJ(n, Fb)
-        _forces(kind, prm, n, Fb, Dd, Vb, A)
+        _forces(kind, prm, n, Fb, Dd, A)
         _scatter(nodes, s, n, A, out)
+        b += 1
 
 
 @_jit
-def gradient_p1(x, X, nodes, Dm_inv, V, kind, prm, out, work):
+def gradient_p1(x, X, nodes, DB, kind, prm, out, work):
     """out = dE/dx: for each tet, g_ai += V P_ij dN_aj.
 
-    Parameters: x, X ``(ndofs,)``; nodes ``(ne, 4)`` vertex indices; Dm_inv
-    ``(ne, 3, 3)``, ``Dm_inv[e, b, j] = dN_{b+1, j}`` (the gradients of the
-    shape functions of nodes 1-3; node 0's is minus their sum); V ``(ne,)``
-    volumes (m^3); out ``(ndofs,)`` (N), overwritten; work ``(>= 1, WORK)``.
+    Parameters: x, X ``(ndofs,)``; nodes ``(ne, 4)`` vertex indices; DB the
+    stored Dm^-1 and V of the range ``0:ne`` (:func:`blocks`), where
+    ``Dm_inv[e, b, j] = dN_{b+1, j}`` (the gradients of the shape functions
+    of nodes 1-3; node 0's is minus their sum) and V the volumes (m^3);
+    out ``(ndofs,)`` (N), overwritten; work ``(>= 1, WORK)``.
     """
     out[:] = 0.0
-    D = Dm_inv.reshape((Dm_inv.shape[0], 9))  # a view (Dm_inv is C-contiguous)
-    gradient_range(x, X, nodes, D, V, kind, prm, 0, nodes.shape[0], out, work[0])
+    gradient_range(x, X, nodes, DB, 0, kind, prm, 0, nodes.shape[0], out, work[0])
 
 
 @_pjit
-def gradient_p1_parts(x, X, nodes, Dm_inv, V, kind, prm, part_start, out, work):
+def gradient_p1_parts(x, X, nodes, DB, first_block, kind, prm, part_start, out, work):
     """:func:`gradient_p1` on numba's threads: the interiors of P parts in parallel, then the seams.
 
     The elements are given grouped: part p's interior is
@@ -226,12 +262,13 @@ def gradient_p1_parts(x, X, nodes, Dm_inv, V, kind, prm, part_start, out, work):
     deschedules a thread costs one wait, not one per colour. Each group keeps
     the element order, so a vertex inside a part gets its contributions in
     the serial loop's order; a seam vertex gets its seam elements' last.
-    ``work`` is ``(>= P, WORK)``: one buffer per part.
+    ``DB, first_block`` are :func:`blocks` of the groups; ``work`` is
+    ``(>= P, WORK)``: one buffer per part.
     """
     out[:] = 0.0
-    D = Dm_inv.reshape((Dm_inv.shape[0], 9))
     n_parts = part_start.shape[0] - 2
     for p in numba.prange(n_parts):
-        gradient_range(x, X, nodes, D, V, kind, prm, part_start[p], part_start[p + 1], out, work[p])
-    gradient_range(x, X, nodes, D, V, kind, prm, part_start[n_parts], part_start[n_parts + 1], out,
-                   work[0])
+        gradient_range(x, X, nodes, DB, first_block[p], kind, prm, part_start[p],
+                       part_start[p + 1], out, work[p])
+    gradient_range(x, X, nodes, DB, first_block[n_parts], kind, prm, part_start[n_parts],
+                   part_start[n_parts + 1], out, work[0])

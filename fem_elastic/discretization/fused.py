@@ -240,6 +240,17 @@ class _P1Geometry:
         self.X = _frozen(space.X, float)  # (ndofs,)
         self.ndofs = space.ndofs
         self._parts: dict[int, _PartitionedP1] = {}
+        self._blocks: np.ndarray | None = None
+
+    @property
+    def blocks(self) -> np.ndarray:
+        """Dm^-1 and V in the force loop's block layout (:func:`._fused_gradient_kernels.blocks`;
+        built on first use, 80 bytes per element)."""
+        if self._blocks is None:
+            from . import _fused_gradient_kernels as kb
+
+            self._blocks = _frozen(kb.blocks(self.Dm_inv, self.V, [0, self.nodes.shape[0]])[0], float)
+        return self._blocks
 
     def parts(self, n_parts: int) -> "_PartitionedP1":
         """The elements split into ``n_parts`` parts, for the threaded gradient (built on first use)."""
@@ -260,8 +271,9 @@ class _PartitionedP1:
     them. On the 153,600-tet beam cut in 2, the seam is 2 % of the
     elements (3,072: the layer of cells on each side of the cut). A body whose slabs meet in
     many places (a ring, a coil) gets a large seam, summed serially: correct
-    results, less parallel. Costs a second copy of the
-    geometry (112 bytes per element).
+    results, less parallel. ``DB, first_block`` hold Dm^-1 and V of each group
+    in the force loop's block layout. Costs a second copy of the geometry (112
+    bytes per element).
     """
 
     def __init__(self, geo: _P1Geometry, n_parts: int):
@@ -284,8 +296,11 @@ class _PartitionedP1:
         self.part_start = _frozen(
             np.concatenate(([0], np.cumsum(np.bincount(group, minlength=n_parts + 1)))), np.int64)
         self.nodes = _frozen(nodes[self.order], np.int64)
-        self.Dm_inv = _frozen(geo.Dm_inv[self.order], float)
-        self.V = _frozen(geo.V[self.order], float)
+        from . import _fused_gradient_kernels as kb
+
+        DB, first_block = kb.blocks(geo.Dm_inv[self.order], geo.V[self.order], self.part_start)
+        self.DB = _frozen(DB, float)
+        self.first_block = _frozen(first_block, np.int64)
 
 
 def _frozen(a: np.ndarray, dtype) -> np.ndarray:
@@ -364,11 +379,10 @@ class FusedP1:
             work = self._work.buffers = np.empty((n_threads, self._g.WORK))
         if n_threads > 1:
             c = g.parts(n_threads)
-            self._g.gradient_p1_parts(self._x(x), g.X, c.nodes, c.Dm_inv, c.V, self.kind,
+            self._g.gradient_p1_parts(self._x(x), g.X, c.nodes, c.DB, c.first_block, self.kind,
                                       self.prm, c.part_start, out, work)
         else:
-            self._g.gradient_p1(self._x(x), g.X, g.nodes, g.Dm_inv, g.V, self.kind, self.prm, out,
-                                work)
+            self._g.gradient_p1(self._x(x), g.X, g.nodes, g.blocks, self.kind, self.prm, out, work)
         return out
 
     def hessian(self, x: np.ndarray, pattern, project: bool = False):
