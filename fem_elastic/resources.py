@@ -53,11 +53,14 @@ BYTES_PER_TET = {1: 6_000, 2: 30_000}
 #: The same through the fused numba kernels (``fem_elastic.discretization.fused``: the element
 #: matrices go straight into the CSR data, through an int32 block map): measured on the same
 #: meshes, P1 1.27-1.29 kB, P2 9.6-9.8 kB per tet, and 1.59 kB per P1 tet on a 540-tet beam
-#: (fixed costs weigh more there), rounded up.
+#: (fixed costs weigh more there), rounded up. The force loop's blocked copy of Dm^-1 and V
+#: (``discretization/_fused_gradient_kernels.py``) added 80 B: P1 1.36-1.46 kB per tet on 1920-
+#: and 8640-tet beams (``scripts/bench_memory_estimate.py``).
 FUSED_BYTES_PER_TET = {1: 1_800, 2: 12_000}
 #: Peak bytes per tet of building a Model alone (mesh, space, mass, per-element data, one
 #: gradient; no tangent): measured with tracemalloc on beam meshes of 4320 and 15360 tets
-#: (P1 0.99-1.00 kB, P2 3.04-3.06 kB per tet), rounded up.
+#: (P1 0.99-1.00 kB, P2 3.04-3.06 kB per tet; P1 80 B more since the force loop's blocked
+#: copy of Dm^-1 and V), rounded up.
 MODEL_BYTES_PER_TET = {1: 1_200, 2: 3_500}
 #: Nonzeros of the assembled stiffness per tet (measured on the same meshes: P1 26-29, P2 384-400).
 NNZ_PER_TET = {1: 30, 2: 400}
