@@ -165,6 +165,46 @@ def test_linear_elastic_needs_exactly_one_newton_iteration():
     assert res.residual_history[-1] < 1e-8 * res.residual_history[0]
 
 
+def test_which_models_are_quadratic():
+    """Model.quadratic: a linear elastic body under dead loads (gravity, traction) only."""
+    lin = small_cantilever(fe.LinearElastic(E, NU))
+    assert lin.quadratic
+    assert fe.Model(lin.mesh, 1000.0, fe.ElasticBody(fe.LinearElastic(E, NU)), fixed="left",
+                    gravity=(0.0, 0.0, -9.81), traction={"right": (0.0, 0.0, -1e3)}).quadratic
+    assert not small_cantilever(fe.NeoHookean(E, NU)).quadratic
+    assert not fe.Model(lin.mesh, 1000.0, fe.ElasticBody(fe.LinearElastic(E, NU)), fixed="left",
+                        ground=fe.Ground(-1.0)).quadratic  # contact: not quadratic
+    mixed = fe.ElasticBody(fe.LinearElastic(E, 0.45), order=2, formulation="mixed")
+    assert not fe.Model(lin.mesh, 1000.0, mixed, fixed="left").quadratic
+
+
+def test_quadratic_model_keeps_its_first_hessian(monkeypatch):
+    """A linear static solve needs its second Newton iteration only for the round-off test:
+    with Model.quadratic the first Hessian is kept (no second assembly), and the answer is the
+    same bits as with a second assembly (the direct solver sees an identical matrix). A stiff
+    steel beam: its residual after the step is at round-off, above rtol = 1e-8 of the load, so
+    the round-off test (which needs a Newton direction) is what ends the solve."""
+    model = fe.Model(fe.beam_mesh(1.0, 0.05, 0.05, (10, 1, 1)), 7850.0,
+                     fe.ElasticBody(fe.LinearElastic(2.1e11, 0.3), order=2), fixed="left",
+                     traction={"right": (0.0, 0.0, -1e5)})
+    calls = []
+    original = type(model).linearize
+
+    def counted(self, *a, **k):
+        calls.append(1)
+        return original(self, *a, **k)
+
+    monkeypatch.setattr(type(model), "linearize", counted)
+    kept = fe.solve_static(model, linear_solver="direct", stability=False)
+    n_kept = len(calls)
+    monkeypatch.setattr(type(model), "quadratic", property(lambda self: False))
+    calls.clear()
+    assembled = fe.solve_static(model, linear_solver="direct", stability=False)
+    assert kept.converged and assembled.converged
+    assert (n_kept, len(calls)) == (1, 2)
+    assert np.array_equal(kept.x, assembled.x)
+
+
 def test_newton_converges_quadratically_for_neohookean():
     """Moderate nonlinearity (tip load alpha = P L^2 / EI = 0.12, ~3.6% L deflection).
     Quadratic convergence: r_{k+1} <= C r_k^2 with C bounded over the last iterations.

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, ClassVar, NamedTuple
 
 import numpy as np
 
@@ -242,6 +242,9 @@ class Material:
 
     E: float
     nu: float
+    #: psi is a quadratic form in F (so the elastic energy is quadratic in the positions and
+    #: its Hessian the same matrix at every state): only :class:`LinearElastic`.
+    quadratic: ClassVar[bool] = False
     if TYPE_CHECKING:  # set in __init__ by object.__setattr__; not dataclass fields
         _mu: float
         _lam: float

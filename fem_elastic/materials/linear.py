@@ -15,6 +15,7 @@ hyperelastic models exist.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -52,6 +53,8 @@ class LinearElastic(Material):
     >>> round(float(P[0, 0])), round(float(P[1, 1]))  # (2 mu + lam) eps, lam eps
     (12000, 4000)
     """
+
+    quadratic: ClassVar[bool] = True
 
     def _tangent(self) -> np.ndarray:
         d = np.eye(3)

@@ -117,6 +117,11 @@ class ElasticPotential(Potential):
         self.material = material
         self.space = space
 
+    @property
+    def quadratic(self) -> bool:  # type: ignore[override]
+        """Whether the energy is quadratic in x: the material's psi is quadratic in F."""
+        return bool(self.material.quadratic)
+
     def F(self, x: np.ndarray) -> np.ndarray:
         """Deformation gradient at the quadrature points, ``(3, 3, nelems, nqp)``."""
         return self.space.deformation_gradient(x - self.space.X)

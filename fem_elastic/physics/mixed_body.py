@@ -243,6 +243,11 @@ class MixedPotential(ElasticPotential):
     True
     """
 
+    @property
+    def quadratic(self) -> bool:  # type: ignore[override]
+        """False: the condensed dilatation term is not quadratic in x."""
+        return False
+
     def __init__(self, material: Material, space: Discretization) -> None:
         check_mixed(material, space.order)
         super().__init__(material, space)

@@ -580,6 +580,12 @@ class Model:
             g += c * term.gradient(x)
         return g
 
+    @property
+    def quadratic(self) -> bool:
+        """Whether Pi is quadratic in x (a linear elastic body under dead loads, no contact):
+        its Hessian is then the same matrix at every state."""
+        return all(p.quadratic for p in self.potentials)
+
     def linearize(self, x: np.ndarray, load_factor: float = 1.0, project: bool = True,
                   body: Potential | None = None) -> tuple[np.ndarray, sp.csr_matrix]:
         """Gradient (N) and Hessian (N/m, CSR) of Pi at x.

@@ -24,6 +24,10 @@ __all__ = ["Potential", "LinearPotential"]
 class Potential:
     """Base class of every energy term."""
 
+    #: The energy is (at most) quadratic in x: its Hessian is the same matrix at every x
+    #: (Newton may keep it, see ``newton_minimize(hessian_constant=...)``).
+    quadratic: bool = False
+
     def energy(self, x: np.ndarray) -> float:  # pragma: no cover - abstract
         raise NotImplementedError
 
@@ -49,6 +53,8 @@ class LinearPotential(Potential):
     X : numpy.ndarray
         ``(ndofs,)`` reference positions (m); the energy is zero there.
     """
+
+    quadratic = True  # linear in x
 
     def __init__(self, force: np.ndarray, X: np.ndarray) -> None:
         self.force = np.asarray(force, dtype=float)

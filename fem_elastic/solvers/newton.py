@@ -170,6 +170,7 @@ def newton_minimize(
     inexact: bool = True,
     min_iter: int = 0,
     max_step: Callable[[np.ndarray, np.ndarray], float] | None = None,
+    hessian_constant: bool = False,
 ) -> NewtonResult:
     """Minimise ``energy`` from ``x0`` over the free DOFs.
 
@@ -243,6 +244,15 @@ def newton_minimize(
         With it the energy at ``x`` is re-evaluated after each linearization,
         since a contact term may adapt its stiffness there (IPC's adaptive
         barrier stiffness).
+    hessian_constant : bool
+        The energy is quadratic (a linear elastic body under dead loads,
+        ``Model.quadratic``): its Hessian, exact or projected, is the same
+        matrix at every x. With ``gradient`` given, the iterations after the
+        first then reuse the first one's Hessian instead of assembling it
+        again (the same bits: the direct solvers see an identical matrix and
+        keep their factor). A linear static solve needs the second iteration
+        only for its round-off test; this makes that iteration a gradient and
+        a back-substitution.
 
     Returns
     -------
@@ -273,8 +283,8 @@ def newton_minimize(
             assert g_scale is not None  # set at it == 0
             need_hessian = math.isfinite(gnorm) and (gnorm > rtol * g_scale or it < min_iter) \
                 and it < max_iter
-        if need_hessian:
-            g, H = linearize(x, not exact)
+        if need_hessian and not (hessian_constant and it > 0 and gradient is not None):
+            g, H = linearize(x, not exact)  # (else g is gradient(x) above, H the first one's)
         result.seconds["linearize"] += time.perf_counter() - t0
         if it == 0:  # the reaction the held DOFs carry: part of the problem's force scale
             reaction = float(np.linalg.norm(g[~free])) if not free.all() else 0.0

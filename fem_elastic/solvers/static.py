@@ -612,6 +612,7 @@ def solve_static(
             gradient=lambda y: model.gradient(y, target),
             min_iter=0 if pred else 1,
             max_step=max_step,
+            hessian_constant=bool(getattr(model, "quadratic", False)),
         )
         total.iterations += res.iterations + pred
         total.residual_history.extend(res.residual_history)
