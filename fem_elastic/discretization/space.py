@@ -152,6 +152,12 @@ class SparsityPattern:
     def diagonal_positions(self) -> np.ndarray:
         """Position in the data array of each diagonal entry, ``(ndofs,)``."""
         n = self.shape[0]
+        # every row of a finite-element pattern holds its diagonal (a node couples to itself),
+        # so the positions are where the column is the row: one pass, where a search of the
+        # sorted keys took 1.3 ms of a 20 ms P2 static solve
+        pos = np.flatnonzero(self._row_of == self.indices)
+        if pos.size == n:
+            return pos
         keys = self._row_of * n + self.indices.astype(np.int64)
         return np.searchsorted(keys, np.arange(n, dtype=np.int64) * (n + 1))
 
@@ -185,7 +191,8 @@ class SparsityPattern:
         """
         key = hash(dofs_mask.tobytes())
         if self._touching_cache[0] != key:
-            self._touching_cache = (key, dofs_mask[self._row_of] | dofs_mask[self.indices])
+            rows = np.repeat(dofs_mask, np.diff(self.indptr))  # = dofs_mask[row of each entry]
+            self._touching_cache = (key, rows | dofs_mask[self.indices])
         mask = self._touching_cache[1]
         assert mask is not None  # set above whenever the key changed from None
         return mask
