@@ -55,7 +55,7 @@ WORK = 20 * BLOCK
 ROWS = 10
 
 
-def blocks(Dm_inv: np.ndarray, V: np.ndarray, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def blocks(Dm_inv: np.ndarray, V: np.ndarray, starts) -> tuple[np.ndarray, np.ndarray]:
     """Dm^-1 and V of the ranges ``starts[r]:starts[r + 1]`` in the kernels' block layout.
 
     Each range is cut into blocks of :data:`BLOCK` elements from its own start
