@@ -1,38 +1,46 @@
 """The P1 force loop of :mod:`fem_elastic.discretization.fused`, in blocks the CPU can vectorise.
 
 ``out = dE/dx``: for each tet, ``g_ai += V P_ij dN_aj`` with ``F = I + Ds Dm^-1``
-(conventions: :mod:`._fused_kernels`). The elements are taken
-:data:`BLOCK` at a time, in five passes over the block:
+(conventions: :mod:`._fused_kernels`). The elements are taken :data:`BLOCK` at
+a time (:func:`_block`), in passes over the block:
 
-1. gather (scalar): the edge displacements ``Ds`` (9 numbers) of each element
-   into a structure-of-arrays work buffer; Dm^-1 and V are stored in that layout
-   once (:func:`blocks`), so the loop reads them in place;
-2. F and J (vectorised);
-3. ln J for the Neo-Hookean material (scalar: numba has no vector ``log``
+1. Dm^-1 and V of the block, stored once in this layout by :func:`blocks`,
+   copied into a buffer on the stack (one contiguous copy);
+2. gather (scalar): the edge displacements ``Ds`` (9 numbers) of each element;
+3. F and J (vectorised);
+4. ln J for the Neo-Hookean material (scalar: numba has no vector ``log``
    without Intel's SVML);
-4. ``V P Dm^-T`` (vectorised), one loop per material;
-5. scatter (scalar), element by element in the serial order.
+5. ``V P Dm^-T`` (vectorised), one loop per material;
+6. scatter (scalar), element by element in the serial order.
 
-Passes 2 and 4 are plain loops over the block of unit stride with compile-time
-row offsets (``row * BLOCK + j``) in three distinct buffers, which LLVM turns
-into AVX code; the element-at-a-time loop it replaces (``_fused_kernels``
-before issue 19's second pass) could not be vectorised because of the gather
-and the scatter inside it. Each value is computed with the same operations in
-the same order as that loop and the numpy materials (no ``fastmath``, so no
+Passes 3 and 5 are plain loops over the block of unit stride with compile-time
+row offsets (``row * BLOCK + j``), which LLVM turns into AVX code. Two things
+make that happen, both measured on the 153,600-tet beam (one thread):
+
+- the buffers are the function's own (``alloca`` on the stack, :func:`_stack`),
+  so LLVM knows that they alias nothing. Buffers handed in as arguments, or
+  Dm^-1 read in place from :func:`blocks`' array, leave it to runtime alias
+  checks over ~30 rows, and the loops stayed scalar: 7.4-7.9 ms against 5.5 ms.
+  (Heap buffers made per call would do as well, but allocate on every step.)
+- the passes are written out in one function: the same passes as separate
+  functions, called per block, measured 7.0-8.3 ms.
+
+The element-at-a-time loop this replaces (``_fused_kernels`` before issue 19's
+second pass) could not be vectorised because of the gather and the scatter
+inside it: 9.2-10.5 ms. Each value is computed with the same operations in the
+same order as that loop and the numpy materials (no ``fastmath``, so no
 reassociation and no FMA contraction), and the scatter keeps the element order:
 **the same bits** as the element-at-a-time loop, checked by
 ``tests/test_explicit_fast.py``.
-
-Measured on the 153,600-tet beam, one thread, same process: 6.3 ms against
-9.2 ms for the element-at-a-time loop with Dm^-1 and V copied into the block
-by the gather, and a further 1.1 ms less with them stored blocked
-(``scripts/bench_explicit.py``).
 """
 
 from __future__ import annotations
 
 import numba
 import numpy as np
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from ._fused_kernels import (
     LINEAR,
@@ -46,13 +54,11 @@ from ._fused_kernels import (
     stvk_P,
 )
 
-#: Elements per block: the work buffers (:data:`WORK` doubles, 10 KiB) and the block of
-#: Dm^-1 and V (5 KiB) stay in L1.
+#: Elements per block: the stack buffers (30 x BLOCK doubles, 15 KiB) stay in L1.
 BLOCK = 64
-#: Doubles of work buffer per thread: Ds then forces (9 rows), F, J, ln J (11).
-WORK = 20 * BLOCK
 #: Rows of a block of the stored geometry: Dm^-1 row by row (9), V (1).
 ROWS = 10
+_NA, _NF, _ND = 9 * BLOCK, 11 * BLOCK, ROWS * BLOCK  # Ds then forces; F, J, ln J; Dm^-1, V
 
 
 def blocks(Dm_inv: np.ndarray, V: np.ndarray, starts) -> tuple[np.ndarray, np.ndarray]:
@@ -63,10 +69,18 @@ def blocks(Dm_inv: np.ndarray, V: np.ndarray, starts) -> tuple[np.ndarray, np.nd
     ``Dm_inv[e].ravel()[k]`` at ``k * BLOCK + j`` and ``V[e]`` at
     ``9 * BLOCK + j`` for the element e = (its range's start) + (block's offset) + j.
 
+    Parameters
+    ----------
+    Dm_inv : ndarray, ``(ne, 3, 3)``
+    V : ndarray, ``(ne,)``
+        Volumes (m^3).
+    starts : sequence of int
+        The ranges' boundaries, increasing, from 0 to ne.
+
     Returns
     -------
     DB : ndarray, ``(n_blocks, ROWS * BLOCK)``
-        72 + 8 bytes per element, plus the padding.
+        80 bytes per element, plus the padding.
     first_block : ndarray of int64, ``(len(starts),)``
         The block of each range's first element; the last entry is ``n_blocks``.
     """
@@ -77,65 +91,31 @@ def blocks(Dm_inv: np.ndarray, V: np.ndarray, starts) -> tuple[np.ndarray, np.nd
     D = Dm_inv.reshape(-1, 9)
     for r in range(len(starts) - 1):
         a, b = int(starts[r]), int(starts[r + 1])
-        n = b - a
-        slots = np.arange(n)
+        slots = np.arange(b - a)
         blk, j = first_block[r] + slots // BLOCK, slots % BLOCK
         DB[blk, :9, j] = D[a:b]
         DB[blk, 9, j] = V[a:b]
     return DB.reshape(len(DB), ROWS * BLOCK), first_block
 
 
-@_jit
-def _gather(x, X, nodes, s, n, A):
-    """Block pass 1: Ds of u = x - X (row-major 3x3: A[3 c + i] = u_{c+1, i} - u_{0, i})."""
-    for j in range(n):
-        e = s + j
-        k0, k1, k2, k3 = 3 * nodes[e, 0], 3 * nodes[e, 1], 3 * nodes[e, 2], 3 * nodes[e, 3]
-        u0, u1, u2 = x[k0] - X[k0], x[k0 + 1] - X[k0 + 1], x[k0 + 2] - X[k0 + 2]
-        A[j] = x[k1] - X[k1] - u0
-        A[BLOCK + j] = x[k1 + 1] - X[k1 + 1] - u1
-        A[2 * BLOCK + j] = x[k1 + 2] - X[k1 + 2] - u2
-        A[3 * BLOCK + j] = x[k2] - X[k2] - u0
-        A[4 * BLOCK + j] = x[k2 + 1] - X[k2 + 1] - u1
-        A[5 * BLOCK + j] = x[k2 + 2] - X[k2 + 2] - u2
-        A[6 * BLOCK + j] = x[k3] - X[k3] - u0
-        A[7 * BLOCK + j] = x[k3 + 1] - X[k3 + 1] - u1
-        A[8 * BLOCK + j] = x[k3 + 2] - X[k3 + 2] - u2
+@intrinsic
+def _stack_pointer(typingctx, n):
+    """A pointer to ``n`` (a compile-time constant) float64 on the calling function's stack."""
+    if not isinstance(n, types.IntegerLiteral):
+        return None
+    size = n.literal_value
+
+    def codegen(context, builder, signature, args):
+        return cgutils.alloca_once(builder, context.get_value_type(types.float64), size=size)
+
+    return types.CPointer(types.float64)(n), codegen
 
 
-@_jit
-def _F_and_J(n, A, Dd, Fb):
-    """Block pass 2: F = I + Ds Dm^-1 into Fb[0:9], J = det F into Fb[9] (vectorised)."""
-    for j in range(n):
-        a0, a1, a2 = A[j], A[BLOCK + j], A[2 * BLOCK + j]
-        b0, b1, b2 = A[3 * BLOCK + j], A[4 * BLOCK + j], A[5 * BLOCK + j]
-        c0, c1, c2 = A[6 * BLOCK + j], A[7 * BLOCK + j], A[8 * BLOCK + j]
-        d00, d01, d02 = Dd[j], Dd[BLOCK + j], Dd[2 * BLOCK + j]
-        d10, d11, d12 = Dd[3 * BLOCK + j], Dd[4 * BLOCK + j], Dd[5 * BLOCK + j]
-        d20, d21, d22 = Dd[6 * BLOCK + j], Dd[7 * BLOCK + j], Dd[8 * BLOCK + j]
-        # as _fused_kernels._deformation_gradient9 (a0 = Ds_00, b0 = Ds_01, c0 = Ds_02: the
-        # edges are the columns of Ds)
-        f0 = a0 * d00 + b0 * d10 + c0 * d20 + 1.0
-        f1 = a0 * d01 + b0 * d11 + c0 * d21
-        f2 = a0 * d02 + b0 * d12 + c0 * d22
-        f3 = a1 * d00 + b1 * d10 + c1 * d20
-        f4 = a1 * d01 + b1 * d11 + c1 * d21 + 1.0
-        f5 = a1 * d02 + b1 * d12 + c1 * d22
-        f6 = a2 * d00 + b2 * d10 + c2 * d20
-        f7 = a2 * d01 + b2 * d11 + c2 * d21
-        f8 = a2 * d02 + b2 * d12 + c2 * d22 + 1.0
-        Fb[j], Fb[BLOCK + j], Fb[2 * BLOCK + j] = f0, f1, f2
-        Fb[3 * BLOCK + j], Fb[4 * BLOCK + j], Fb[5 * BLOCK + j] = f3, f4, f5
-        Fb[6 * BLOCK + j], Fb[7 * BLOCK + j], Fb[8 * BLOCK + j] = f6, f7, f8
-        # J as _fused_kernels.neohookean_P forms it: F_0k times the cofactor's first row
-        Fb[9 * BLOCK + j] = f0 * (f4 * f8 - f5 * f7) + f1 * (f5 * f6 - f3 * f8) + f2 * (f3 * f7 - f4 * f6)
-
-
-@_jit
-def _lnJ(n, Fb):
-    """Block pass 3 (Neo-Hookean only): ln J into Fb[10]; NaN for J < 0, -inf for J = 0."""
-    for j in range(n):
-        Fb[10 * BLOCK + j] = np.log(Fb[9 * BLOCK + j])
+@_jit_inline
+def _stack(n):
+    """A float64 array of ``n`` entries on the stack of the function it is inlined into (no heap
+    allocation, and private to the thread)."""
+    return numba.carray(_stack_pointer(n), n)
 
 
 @_jit_inline
@@ -168,15 +148,58 @@ def _store_force(p, v, j, Dd, A):
 
 
 @_jit
-def _forces(kind, prm, n, Fb, Dd, A):
-    """Block pass 4: the nodal forces of nodes 1-3 into A (vectorised; one loop per material)."""
+def _block(x, X, nodes, Dsrc, kind, prm, s, n, out):
+    """out += the forces of the elements s:s+n (n <= BLOCK), whose Dm^-1 and V are ``Dsrc``."""
+    A = _stack(_NA)  # Ds (row-major 3x3: A[3 c + i] = u_{c+1, i} - u_{0, i}), then the forces
+    Fb = _stack(_NF)  # F (9 rows), J, ln J
+    Dd = _stack(_ND)  # Dm^-1 (9 rows), V
+    for k in range(_ND):
+        Dd[k] = Dsrc[k]
+    # gather: the edges of u = x - X (as _fused_kernels._deformation_gradient9)
+    for j in range(n):
+        e = s + j
+        k0, k1, k2, k3 = 3 * nodes[e, 0], 3 * nodes[e, 1], 3 * nodes[e, 2], 3 * nodes[e, 3]
+        u0, u1, u2 = x[k0] - X[k0], x[k0 + 1] - X[k0 + 1], x[k0 + 2] - X[k0 + 2]
+        A[j] = x[k1] - X[k1] - u0
+        A[BLOCK + j] = x[k1 + 1] - X[k1 + 1] - u1
+        A[2 * BLOCK + j] = x[k1 + 2] - X[k1 + 2] - u2
+        A[3 * BLOCK + j] = x[k2] - X[k2] - u0
+        A[4 * BLOCK + j] = x[k2 + 1] - X[k2 + 1] - u1
+        A[5 * BLOCK + j] = x[k2 + 2] - X[k2 + 2] - u2
+        A[6 * BLOCK + j] = x[k3] - X[k3] - u0
+        A[7 * BLOCK + j] = x[k3 + 1] - X[k3 + 1] - u1
+        A[8 * BLOCK + j] = x[k3 + 2] - X[k3 + 2] - u2
+    # F = I + Ds Dm^-1 and J = det F (vectorised)
+    for j in range(n):
+        a0, a1, a2 = A[j], A[BLOCK + j], A[2 * BLOCK + j]
+        b0, b1, b2 = A[3 * BLOCK + j], A[4 * BLOCK + j], A[5 * BLOCK + j]
+        c0, c1, c2 = A[6 * BLOCK + j], A[7 * BLOCK + j], A[8 * BLOCK + j]
+        d00, d01, d02 = Dd[j], Dd[BLOCK + j], Dd[2 * BLOCK + j]
+        d10, d11, d12 = Dd[3 * BLOCK + j], Dd[4 * BLOCK + j], Dd[5 * BLOCK + j]
+        d20, d21, d22 = Dd[6 * BLOCK + j], Dd[7 * BLOCK + j], Dd[8 * BLOCK + j]
+        f0 = a0 * d00 + b0 * d10 + c0 * d20 + 1.0
+        f1 = a0 * d01 + b0 * d11 + c0 * d21
+        f2 = a0 * d02 + b0 * d12 + c0 * d22
+        f3 = a1 * d00 + b1 * d10 + c1 * d20
+        f4 = a1 * d01 + b1 * d11 + c1 * d21 + 1.0
+        f5 = a1 * d02 + b1 * d12 + c1 * d22
+        f6 = a2 * d00 + b2 * d10 + c2 * d20
+        f7 = a2 * d01 + b2 * d11 + c2 * d21
+        f8 = a2 * d02 + b2 * d12 + c2 * d22 + 1.0
+        Fb[j], Fb[BLOCK + j], Fb[2 * BLOCK + j] = f0, f1, f2
+        Fb[3 * BLOCK + j], Fb[4 * BLOCK + j], Fb[5 * BLOCK + j] = f3, f4, f5
+        Fb[6 * BLOCK + j], Fb[7 * BLOCK + j], Fb[8 * BLOCK + j] = f6, f7, f8
+        # J as _fused_kernels.neohookean_P forms it: F_0k times the cofactor's first row
+        Fb[9 * BLOCK + j] = f0 * (f4 * f8 - f5 * f7) + f1 * (f5 * f6 - f3 * f8) + f2 * (f3 * f7 - f4 * f6)
+    # V P Dm^-T, the forces on nodes 1-3 (vectorised), one loop per material
     if kind == NEOHOOKEAN:
         mu, lam = prm[0], prm[1]
+        for j in range(n):  # scalar: ln J; NaN for J < 0, -inf for J = 0
+            Fb[10 * BLOCK + j] = np.log(Fb[9 * BLOCK + j])
         for j in range(n):
             f0, f1, f2, f3, f4, f5, f6, f7, f8 = _load_F(Fb, j)
-            # as _fused_kernels.neohookean_P, with ln J from pass 3
-            J = Fb[9 * BLOCK + j]
-            c = (lam * Fb[10 * BLOCK + j] - mu) / J
+            # as _fused_kernels.neohookean_P, with ln J from the loop above
+            c = (lam * Fb[10 * BLOCK + j] - mu) / Fb[9 * BLOCK + j]
             k0, k1, k2 = f4 * f8 - f5 * f7, f5 * f6 - f3 * f8, f3 * f7 - f4 * f6
             k3, k4, k5 = f2 * f7 - f1 * f8, f0 * f8 - f2 * f6, f1 * f6 - f0 * f7
             k6, k7, k8 = f1 * f5 - f2 * f4, f2 * f3 - f0 * f5, f0 * f4 - f1 * f3
@@ -193,11 +216,7 @@ def _forces(kind, prm, n, Fb, Dd, A):
     else:
         for j in range(n):
             _store_force(stable_neohookean_P(_load_F(Fb, j), prm), Dd[9 * BLOCK + j], j, Dd, A)
-
-
-@_jit
-def _scatter(nodes, s, n, A, out):
-    """Block pass 5: out += the forces, element by element (node 0 takes minus the others' sum)."""
+    # scatter, element by element (node 0 takes minus the others' sum)
     for j in range(n):
         e = s + j
         k0, k1, k2, k3 = 3 * nodes[e, 0], 3 * nodes[e, 1], 3 * nodes[e, 2], 3 * nodes[e, 3]
@@ -212,44 +231,34 @@ def _scatter(nodes, s, n, A, out):
 
 
 @_jit
-def gradient_range(x, X, nodes, DB, b0, kind, prm, start, stop, out, w):
+def gradient_range(x, X, nodes, DB, b0, kind, prm, start, stop, out):
     """out += dE_e/dx of the elements start:stop, BLOCK at a time.
 
     ``DB[b0 + i]`` is the stored Dm^-1 and V of the block starting at element
-    ``start + i * BLOCK`` (:func:`blocks`); ``w`` is a work buffer of
-    :data:`WORK` doubles (one per thread), so no call allocates.
+    ``start + i * BLOCK`` (:func:`blocks`).
     """
-    A = w[:9 * BLOCK]
-    Fb = w[9 * BLOCK:20 * BLOCK]
     b = b0
     for s in range(start, stop, BLOCK):
-        n = min(BLOCK, stop - s)
-        Dd = DB[b]
-        _gather(x, X, nodes, s, n, A)
-        _F_and_J(n, A, Dd, Fb)
-        if kind == NEOHOOKEAN:
-            _lnJ(n, Fb)
-        _forces(kind, prm, n, Fb, Dd, A)
-        _scatter(nodes, s, n, A, out)
+        _block(x, X, nodes, DB[b], kind, prm, s, min(BLOCK, stop - s), out)
         b += 1
 
 
 @_jit
-def gradient_p1(x, X, nodes, DB, kind, prm, out, work):
+def gradient_p1(x, X, nodes, DB, kind, prm, out):
     """out = dE/dx: for each tet, g_ai += V P_ij dN_aj.
 
     Parameters: x, X ``(ndofs,)``; nodes ``(ne, 4)`` vertex indices; DB the
     stored Dm^-1 and V of the range ``0:ne`` (:func:`blocks`), where
     ``Dm_inv[e, b, j] = dN_{b+1, j}`` (the gradients of the shape functions
     of nodes 1-3; node 0's is minus their sum) and V the volumes (m^3);
-    out ``(ndofs,)`` (N), overwritten; work ``(>= 1, WORK)``.
+    out ``(ndofs,)`` (N), overwritten.
     """
     out[:] = 0.0
-    gradient_range(x, X, nodes, DB, 0, kind, prm, 0, nodes.shape[0], out, work[0])
+    gradient_range(x, X, nodes, DB, 0, kind, prm, 0, nodes.shape[0], out)
 
 
 @_pjit
-def gradient_p1_parts(x, X, nodes, DB, first_block, kind, prm, part_start, out, work):
+def gradient_p1_parts(x, X, nodes, DB, first_block, kind, prm, part_start, out):
     """:func:`gradient_p1` on numba's threads: the interiors of P parts in parallel, then the seams.
 
     The elements are given grouped: part p's interior is
@@ -262,13 +271,12 @@ def gradient_p1_parts(x, X, nodes, DB, first_block, kind, prm, part_start, out, 
     deschedules a thread costs one wait, not one per colour. Each group keeps
     the element order, so a vertex inside a part gets its contributions in
     the serial loop's order; a seam vertex gets its seam elements' last.
-    ``DB, first_block`` are :func:`blocks` of the groups; ``work`` is
-    ``(>= P, WORK)``: one buffer per part.
+    ``DB, first_block`` are :func:`blocks` of the groups.
     """
     out[:] = 0.0
     n_parts = part_start.shape[0] - 2
     for p in numba.prange(n_parts):
         gradient_range(x, X, nodes, DB, first_block[p], kind, prm, part_start[p],
-                       part_start[p + 1], out, work[p])
+                       part_start[p + 1], out)
     gradient_range(x, X, nodes, DB, first_block[n_parts], kind, prm, part_start[n_parts],
-                   part_start[n_parts + 1], out, work[0])
+                   part_start[n_parts + 1], out)

@@ -58,7 +58,6 @@ from __future__ import annotations
 
 import logging
 import os
-import threading
 import weakref
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable
@@ -340,9 +339,6 @@ class FusedP1:
         from . import _fused_gradient_kernels  # numba is importable: _kernels() loaded it
 
         self._g = _fused_gradient_kernels
-        # the force loop's work buffers, one row per numba thread, one set per calling thread
-        # (a FusedP1 may be shared by Python threads: solve_static in a pool)
-        self._work = threading.local()
         self.kind = getattr(self._k, name.upper())
         self.prm = params(material)
         entry = _cache.get(space)
@@ -374,15 +370,12 @@ class FusedP1:
         g = self.geo
         out = _out_array(out, g.ndofs)
         n_threads = _threads(g.nodes.shape[0])
-        work = getattr(self._work, "buffers", None)
-        if work is None or work.shape[0] < n_threads:
-            work = self._work.buffers = np.empty((n_threads, self._g.WORK))
         if n_threads > 1:
             c = g.parts(n_threads)
             self._g.gradient_p1_parts(self._x(x), g.X, c.nodes, c.DB, c.first_block, self.kind,
-                                      self.prm, c.part_start, out, work)
+                                      self.prm, c.part_start, out)
         else:
-            self._g.gradient_p1(self._x(x), g.X, g.nodes, g.blocks, self.kind, self.prm, out, work)
+            self._g.gradient_p1(self._x(x), g.X, g.nodes, g.blocks, self.kind, self.prm, out)
         return out
 
     def hessian(self, x: np.ndarray, pattern, project: bool = False):
