@@ -92,6 +92,31 @@ def test_blocked_gradient_is_the_element_loop_bit_for_bit(material):
     assert np.array_equal(part, ref)
 
 
+def test_kernel_caches_are_dropped_when_a_module_they_inline_changes(tmp_path):
+    """numba's cache checks only a kernel's own file: drop_stale_caches removes a kernel
+    module's cache files when a file it depends on changed, and leaves them otherwise."""
+    from fem_elastic.discretization._fused_kernels import drop_stale_caches
+
+    mod, dep = tmp_path / "kern.py", tmp_path / "laws.py"
+    mod.write_text("x = 1\n")
+    dep.write_text("def P(F): return F\n")
+    cache = tmp_path / "__pycache__"
+    cache.mkdir()
+    files = [cache / "kern.f-10.py311.nbi", cache / "kern.f-10.py311.1.nbc"]
+    other = cache / "laws.g-3.py311.nbi"  # another module's cache: never touched
+    for f in (*files, other):
+        f.write_bytes(b"cached")
+    assert drop_stale_caches(str(mod), str(dep))  # no digest yet: dropped, digest written
+    assert not any(f.exists() for f in files) and other.exists()
+    for f in files:
+        f.write_bytes(b"cached")
+    assert not drop_stale_caches(str(mod), str(dep))  # unchanged dependency: kept
+    assert all(f.exists() for f in files)
+    dep.write_text("def P(F): return 2 * F\n")
+    assert drop_stale_caches(str(mod), str(dep))  # edited dependency: dropped again
+    assert not any(f.exists() for f in files) and other.exists()
+
+
 def test_blocked_gradient_keeps_nan_for_inverted_elements():
     """An inverted tet (J < 0) makes the Neo-Hookean force NaN, as the numpy material does (the
     explicit integrators stop on it); the blocked ln J pass must not hide it."""

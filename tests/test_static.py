@@ -177,6 +177,12 @@ def test_which_models_are_quadratic():
     mixed = fe.ElasticBody(fe.LinearElastic(E, 0.45), order=2, formulation="mixed")
     assert not fe.Model(lin.mesh, 1000.0, mixed, fixed="left").quadratic
 
+    class Stiffening(fe.LinearElastic):  # a user's law on top of LinearElastic: not quadratic
+        def psi(self, F):
+            return super().psi(F) * (1.0 + super().psi(F) / E)
+
+    assert not small_cantilever(Stiffening(E, NU)).quadratic
+
 
 def test_quadratic_model_keeps_its_first_hessian(monkeypatch):
     """A linear static solve needs its second Newton iteration only for the round-off test:

@@ -30,8 +30,9 @@ second pass) could not be vectorised because of the gather and the scatter
 inside it: 9.2-10.5 ms. Each value is computed with the same operations in the
 same order as that loop and the numpy materials (no ``fastmath``, so no
 reassociation and no FMA contraction), and the scatter keeps the element order:
-**the same bits** as the element-at-a-time loop, checked by
-``tests/test_explicit_fast.py``.
+**the same bits** as the element-at-a-time loop for every finite result, and NaN
+in the same places (a NaN's sign bit may differ: the vector code orders NaN
+operands otherwise), checked by ``tests/test_explicit_fast.py``.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from . import _fused_kernels
 from ._fused_kernels import (
     LINEAR,
     NEOHOOKEAN,
@@ -49,10 +51,13 @@ from ._fused_kernels import (
     _jit,
     _jit_inline,
     _pjit,
+    drop_stale_caches,
     linear_P,
     stable_neohookean_P,
     stvk_P,
 )
+
+drop_stale_caches(__file__, _fused_kernels.__file__)  # the laws are inlined from there
 
 #: Elements per block: the stack buffers (30 x BLOCK doubles, 15 KiB) stay in L1.
 BLOCK = 64
@@ -114,7 +119,11 @@ def _stack_pointer(typingctx, n):
 @_jit_inline
 def _stack(n):
     """A float64 array of ``n`` entries on the stack of the function it is inlined into (no heap
-    allocation, and private to the thread)."""
+    allocation, and private to the thread).
+
+    Only for jitted callers that do not let the array escape: ``inline="always"`` is what puts
+    the ``alloca`` in the caller's frame (called on its own, it would point into a dead frame).
+    """
     return numba.carray(_stack_pointer(n), n)
 
 

@@ -49,6 +49,47 @@ _jit_inline = numba.njit(cache=True, error_model="numpy", nogil=True, inline="al
 _pjit = numba.njit(cache=True, error_model="numpy", nogil=True, parallel=True)
 
 
+def drop_stale_caches(module_file: str, *dependencies: str) -> bool:
+    """Delete numba's cache files of ``module_file`` if a module its kernels call has changed.
+
+    numba's ``cache=True`` checks only the source file of the cached function itself: a
+    kernel that inlines code from another module (the material laws of this one) keeps its
+    old machine code when only that other module is edited. The kernel modules call this
+    at import with the files they depend on; a digest of those files is kept beside the
+    cache (``__pycache__/<module>.deps``) and, when it differs, the module's ``*.nbi`` and
+    ``*.nbc`` files are removed, so numba compiles anew. Best effort: a ``__pycache__``
+    that cannot be written (an installed package; numba then caches elsewhere, and the
+    sources do not change there) is left alone.
+
+    Returns
+    -------
+    bool
+        Whether cache files were removed.
+    """
+    import hashlib
+    from pathlib import Path
+
+    here = Path(module_file)
+    cache = here.parent / "__pycache__"
+    stamp = cache / f"{here.stem}.deps"
+    digest = hashlib.sha256(b"".join(Path(d).read_bytes() for d in dependencies)).hexdigest()
+    try:
+        if stamp.read_text() == digest:
+            return False
+    except OSError:
+        pass
+    removed = False
+    try:
+        for f in cache.glob(f"{here.stem}.*.nb[ic]"):
+            f.unlink(missing_ok=True)
+            removed = True
+        cache.mkdir(exist_ok=True)
+        stamp.write_text(digest)
+    except OSError:
+        pass
+    return removed
+
+
 # pointwise materials ----------------------------------------------------------------
 @_jit
 def _det(F):

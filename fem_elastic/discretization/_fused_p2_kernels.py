@@ -45,9 +45,12 @@ import numba
 import numpy as np
 
 from . import _fused_kernels as _k
+from . import _fused_tangent_kernels
 from ._fused_tangent_kernels import element_offsets, project_psd, tangent  # offsets: any node count
 from .fused import _REGISTRY, _frozen, _out_array, _readonly
 from .space import Discretization
+
+_k.drop_stale_caches(__file__, _k.__file__, _fused_tangent_kernels.__file__)  # laws, tangents
 
 _jit = numba.njit(cache=True, error_model="numpy", nogil=True)
 #: Per-point helpers inlined into the element loops at numba's IR level (as

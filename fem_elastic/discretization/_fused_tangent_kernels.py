@@ -53,7 +53,18 @@ import weakref
 import numba
 import numpy as np
 
-from ._fused_kernels import LINEAR, NEOHOOKEAN, STVK, _cofactor, _deformation_gradient, _frobenius2
+from . import _fused_kernels
+from ._fused_kernels import (
+    LINEAR,
+    NEOHOOKEAN,
+    STVK,
+    _cofactor,
+    _deformation_gradient,
+    _frobenius2,
+    drop_stale_caches,
+)
+
+drop_stale_caches(__file__, _fused_kernels.__file__)  # F and the cofactor are inlined from there
 
 _jit = numba.njit(cache=True, error_model="numpy", nogil=True)
 

@@ -243,7 +243,8 @@ class Material:
     E: float
     nu: float
     #: psi is a quadratic form in F (so the elastic energy is quadratic in the positions and
-    #: its Hessian the same matrix at every state): only :class:`LinearElastic`.
+    #: its Hessian the same matrix at every state): only :class:`LinearElastic`. Read from the
+    #: material's own class only (a subclass must declare it again to keep it).
     quadratic: ClassVar[bool] = False
     if TYPE_CHECKING:  # set in __init__ by object.__setattr__; not dataclass fields
         _mu: float

@@ -119,8 +119,12 @@ class ElasticPotential(Potential):
 
     @property
     def quadratic(self) -> bool:  # type: ignore[override]
-        """Whether the energy is quadratic in x: the material's psi is quadratic in F."""
-        return bool(self.material.quadratic)
+        """Whether the energy is quadratic in x: the material's psi is quadratic in F.
+
+        Only a class that declares it itself counts (``LinearElastic``): a user's subclass of
+        it that changes psi does not inherit the claim.
+        """
+        return bool(vars(type(self.material)).get("quadratic", False))
 
     def F(self, x: np.ndarray) -> np.ndarray:
         """Deformation gradient at the quadrature points, ``(3, 3, nelems, nqp)``."""
