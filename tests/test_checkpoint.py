@@ -106,6 +106,49 @@ def test_resumed_run_is_bit_for_bit_the_uninterrupted_one(tmp_path, case, how):
     assert (d / STEPS_NAME).stat().st_size == steps * len(STEP_FIELDS) * 8
 
 
+def _two_cubes_ipc():
+    """A 0.1 m cube 2 mm above another, whose bottom is held, IPC contact between them (96 tets)."""
+    m = fe.beam_mesh(length=0.1, width=0.1, height=0.1, cells=(2, 2, 2))
+    p, t = m.p.T, m.t.T
+    mesh = fe.mesh_from_arrays(np.vstack([p, p + [0.0, 0.0, 0.102]]), np.vstack([t, t + len(p)]))
+    fixed = np.zeros(mesh.p.shape[1], dtype=bool)
+    fixed[:len(p)] = mesh.p[2, :len(p)] < 1e-12
+    return fe.Model(mesh, 1000.0, fe.ElasticBody(fe.NeoHookean(E=1e6, nu=0.3)), fixed=fixed,
+                    gravity=(0.0, 0.0, -9.81), contact=fe.IPCContact(dhat=1e-3))
+
+
+def test_ipc_resume_keeps_the_adaptive_barrier_stiffness(tmp_path):
+    """IPC's adaptive kappa is state of the model: the checkpoint keeps it, so the resumed run is
+    the uninterrupted one bit for bit (without it the resumed run restarts from the bound kappa
+    and drifts by ~1e-8 m here). ipctk sums the pair Hessians on several threads in a varying
+    order (two uninterrupted runs then differ by ~3e-17 m), so the test runs it on one thread."""
+    ipctk = pytest.importorskip("ipctk")
+    threads = ipctk.get_num_threads()
+    ipctk.set_num_threads(1)
+    try:
+        steps, dt = 17, 0.01
+        state = fe.State.rest(_two_cubes_ipc())
+        model = _two_cubes_ipc()
+        full = fe.simulate(model, fe.ImplicitEuler(), dt, steps=steps, state=state, record_every=2,
+                           check_stability=False)
+        d = tmp_path / "ck"
+        with pytest.raises(KeyboardInterrupt):
+            fe.simulate(_two_cubes_ipc(), fe.ImplicitEuler(), dt, steps=steps, state=state,
+                        record_every=2, check_stability=False, checkpoint_dir=d,
+                        callback=_StopAt(10))
+        ck = fe.load_checkpoint(d)
+        kappa = ck.model_state["contact.kappa"][0]
+        fresh = _two_cubes_ipc()
+        assert kappa != fresh.contact.kappa  # the contact set it during the first 10 steps
+        resumed = fe.simulate(fresh, fe.ImplicitEuler(), dt, steps=steps, state=state,
+                              record_every=2, check_stability=False, checkpoint_dir=d, resume=True)
+        assert resumed.resumed_from_step == 10
+        assert_same_run(full, resumed)
+        assert fresh.contact.kappa == model.contact.kappa
+    finally:
+        ipctk.set_num_threads(threads)
+
+
 def test_newmark_resume_needs_the_remembered_acceleration(tmp_path):
     """Without the integrator's state the resumed run is not the same: the test can fail."""
     make_model, _, dt, initial = CASES["Newmark, StVK P2, kicked"]

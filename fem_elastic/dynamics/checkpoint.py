@@ -4,12 +4,16 @@
 ``checkpoint_every`` steps, when the run is interrupted (Ctrl-C) and when it
 completes; ``resume=True`` continues from the last one, and the resumed run
 records exactly (bit for bit) the trajectory the uninterrupted run records.
+(IPC contact through ipctk sums on several threads in a varying order: there
+two runs agree to round-off, resumed or not, and bit for bit with
+``ipctk.set_num_threads(1)``; see :mod:`fem_elastic.physics.ipc_contact`.)
 
 A checkpoint directory holds
 
 - ``checkpoint.npz``: the state (``x``, ``v``, ``t``), what the integrator
   remembers between steps (:meth:`Integrator.checkpoint_state`, e.g.
-  Newmark's acceleration), the loop's own bookkeeping (the energy bound's
+  Newmark's acceleration) and what the model does (IPC's adaptive barrier
+  stiffness, :func:`model_checkpoint_state`), the loop's own bookkeeping (the energy bound's
   reference and scale, whether a driven boundary was moving, the wall time so
   far) and the counts of records below that belong to it; plus a description
   of the run (model, integrator and settings) that a resume must match.
@@ -235,6 +239,9 @@ class Checkpoint:
     crc32 : dict of str to int
         CRC-32 of the bytes of each appended file that belong to this checkpoint
         (checked when it was read).
+    model_state : dict of numpy.ndarray
+        What the model remembered (:func:`model_checkpoint_state`: IPC's adaptive
+        kappa); empty for most models and for checkpoints written before it was kept.
     """
 
     directory: Path
@@ -256,6 +263,7 @@ class Checkpoint:
     work: float = 0.0
     work_abs: float = 0.0
     crc32: dict = field(default_factory=dict)
+    model_state: dict = field(default_factory=dict)
 
     @property
     def complete(self) -> bool:
@@ -359,6 +367,7 @@ def load_checkpoint(directory: str | os.PathLike[str]) -> Checkpoint:
             "directory to start the run afresh."
         ) from None
     integ = {k[len("integrator/"):]: a for k, a in arrays.items() if k.startswith("integrator/")}
+    model_state = {k[len("model/"):]: a for k, a in arrays.items() if k.startswith("model/")}
     frames = _read_records(d / FRAMES_NAME, n_frames, frame_size)
     steps = _read_records(d / STEPS_NAME, step, len(STEP_FIELDS))
     crc = {FRAMES_NAME: zlib.crc32(frames.astype("<f8").tobytes()),
@@ -375,7 +384,7 @@ def load_checkpoint(directory: str | os.PathLike[str]) -> Checkpoint:
         integrator_state=integ, fingerprint=fingerprint, e_ref=e_ref, scale=scale,
         driving=driving, wall_time=wall, frames=frames, step_stats=stats, cuts=cuts,
         integrator=fingerprint.get("integrator", ""), dt=dt, cuts_bytes=cuts_bytes,
-        work=work, work_abs=work_abs, crc32=crc,
+        work=work, work_abs=work_abs, crc32=crc, model_state=model_state,
     )
 
 
@@ -528,6 +537,8 @@ class Checkpointer:
         }
         for key, a in snapshot.integrator_state.items():
             arrays[f"integrator/{key}"] = np.asarray(a)
+        for key, a in snapshot.model_state.items():
+            arrays[f"model/{key}"] = np.asarray(a)
 
         def write(tmp):
             buf = _io.BytesIO()
@@ -589,6 +600,27 @@ class _Snapshot:
     integrator_state: dict
     work: float = 0.0
     work_abs: float = 0.0
+    model_state: dict = field(default_factory=dict)
+
+
+def model_checkpoint_state(model) -> dict:
+    """What the model remembers between steps: its bound contact's state (IPC's adaptive
+    kappa), as ``{"contact.<name>": array}``; empty for a model without such state."""
+    save = getattr(getattr(model, "contact", None), "checkpoint_state", None)
+    return {f"contact.{k}": a for k, a in save().items()} if save is not None else {}
+
+
+def restore_model_state(model, saved: dict) -> None:
+    """Give the model back what :func:`model_checkpoint_state` returned (a resumed run)."""
+    contact = {k[len("contact."):]: a for k, a in saved.items() if k.startswith("contact.")}
+    if contact:
+        restore = getattr(getattr(model, "contact", None), "restore_state", None)
+        if restore is None:
+            raise InvalidParameter(
+                f"the checkpoint holds a contact's state ({sorted(contact)}) but this model has "
+                "no contact that keeps one: it was written by another model."
+            )
+        restore(contact)
 
 
 def check_resumable(ck: Checkpoint, fingerprint: dict) -> None:

@@ -103,7 +103,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..physics.inversion import DetF
-from .checkpoint import _Snapshot, frame_record
+from .checkpoint import _Snapshot, frame_record, model_checkpoint_state
 from .state import State
 
 if TYPE_CHECKING:  # for annotations only (simulate imports this module)
@@ -418,7 +418,8 @@ class CheckpointWriter(Observer):
     def _snapshot(self, run, steps_done: int, state) -> _Snapshot:
         return _Snapshot(steps_done, state, len(run.frames), len(run.cuts), self.watch.e_ref,
                          self.watch.scale, self.watch.driving, run.wall_time(),
-                         run.integrator.checkpoint_state(state), self.watch.work, self.watch.work_abs)
+                         run.integrator.checkpoint_state(state), self.watch.work, self.watch.work_abs,
+                         model_checkpoint_state(run.model))
 
     def on_start(self, run) -> None:
         self.snap = self._snapshot(run, run.steps_done, run.state)

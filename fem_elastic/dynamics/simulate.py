@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, TypedDict
 import numpy as np
 
 from ..errors import Diverged, InvalidMesh, InvalidParameter, StepFailed
-from .checkpoint import Checkpoint, trajectory_from_records
+from .checkpoint import Checkpoint, restore_model_state, trajectory_from_records
 from .contact_watch import ContactWatch, contact_stats, has_contact_diagnostics
 from .integrators.base import check_dt, check_state
 from .observers import (BlowUpWatch, Callback, CheckpointWriter, InversionWatch, ProgressBar, Recorder,
@@ -369,6 +369,7 @@ class Run:
             for name, values in ck.step_stats.items():
                 self.stats[name][:ck.step] = values
             integrator.restore_state(ck.state, ck.integrator_state)
+            restore_model_state(model, ck.model_state)
         self._t_start, self._t_stop = time.perf_counter(), None
 
     def wall_time(self) -> float:
