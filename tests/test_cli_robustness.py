@@ -174,6 +174,24 @@ def _wait_for(predicate, proc, seconds=120.0):
     return False
 
 
+def test_a_ctrl_c_that_c_code_turned_into_another_error_is_still_an_interruption(monkeypatch, capsys):
+    """numpy's array comparison, interrupted by Ctrl-C, raises a TypeError about structured
+    arrays instead of KeyboardInterrupt (seen once in test_ctrl_c_at_a_few_moments under load):
+    the command's SIGINT handler remembers the interrupt, so whatever error comes out of it is
+    reported as the interruption (exit 130), not as an internal error (exit 3)."""
+    from fem_elastic.app import cli
+
+    monkeypatch.setattr(cli, "_ctrl_c_seen", False)
+    with pytest.raises(KeyboardInterrupt):
+        cli._note_ctrl_c(signal.SIGINT, None)  # what the handler does: Python's own behaviour
+    assert cli._ctrl_c_seen
+    error = TypeError("Cannot compare structured arrays unless they have a common dtype.")
+    assert cli._report(error, debug=False) == 130
+    assert "interrupted" in capsys.readouterr().err
+    monkeypatch.setattr(cli, "_ctrl_c_seen", False)  # without a Ctrl-C it stays an internal error
+    assert cli._report(error, debug=False) not in (0, 130)
+
+
 @pytest.mark.parametrize("moment", ["scene read", "first frames written"])
 def test_ctrl_c_at_a_few_moments(moment, tmp_path):
     out = tmp_path / "out"

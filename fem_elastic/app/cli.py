@@ -37,7 +37,7 @@ import logging
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 __all__ = ["main"]
 
@@ -664,12 +664,50 @@ def main(argv=None) -> int:
     """
     _usable_streams()
     debug = "--debug" in (sys.argv[1:] if argv is None else [str(a) for a in argv])
+    restore = _watch_ctrl_c()
     try:
         return _main(argv)
     except SystemExit:  # argparse's --help and usage errors: their own message and status
         raise
     except BaseException as exc:  # noqa: BLE001 - the one place every error becomes a message
         return _report(exc, debug)
+    finally:
+        restore()
+
+
+#: Set when a Ctrl-C (SIGINT) reached the command (see :func:`_watch_ctrl_c`).
+_ctrl_c_seen = False
+
+
+def _note_ctrl_c(signum, frame):
+    """Python's own SIGINT behaviour (raise KeyboardInterrupt), remembering that it happened."""
+    global _ctrl_c_seen
+    _ctrl_c_seen = True
+    raise KeyboardInterrupt
+
+
+def _watch_ctrl_c() -> Callable[[], None]:
+    """Remember a Ctrl-C, so that it is reported as one whatever exception it turns into.
+
+    A KeyboardInterrupt raised inside some C code does not come out as itself: numpy's array
+    comparison, interrupted, falls back to another path and raises ``TypeError: Cannot compare
+    structured arrays ...`` (seen once in ``tests/test_cli_robustness.py``). Only where the
+    handler is still Python's default one, in the main thread. Returns what puts the default
+    handler back (the command may run inside a longer process: a test, a notebook).
+    """
+    import signal
+
+    try:
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            signal.signal(signal.SIGINT, _note_ctrl_c)
+
+            def restore() -> None:
+                signal.signal(signal.SIGINT, signal.default_int_handler)
+
+            return restore
+    except ValueError:  # not the main thread: leave it
+        pass
+    return lambda: None
 
 
 def _main(argv) -> int:
@@ -728,7 +766,8 @@ def _report(exc: BaseException, debug: bool) -> int:
         import traceback
 
         traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
-    if isinstance(exc, KeyboardInterrupt):
+    if isinstance(exc, KeyboardInterrupt) or _ctrl_c_seen:
+        # (an error that a Ctrl-C turned into, in C code, is the interruption too)
         message, status = "interrupted", _EXIT_INTERRUPTED
     elif isinstance(exc, FemElasticError):  # a bad input (2), or a computation that failed (1:
         # fe.Diverged and fe.StepFailed among them)
