@@ -80,13 +80,13 @@ def test_blocked_gradient_is_the_element_loop_bit_for_bit(material):
     ne = g.nodes.shape[0]
     assert ne % B.BLOCK != 0
     blocked = np.empty(model.ndofs)
-    B.gradient_p1(x, g.X, g.nodes, g.blocks, kern.kind, kern.prm, blocked)
+    B.gradient_p1(x, g.X, np.empty(model.ndofs), g.nodes, g.blocks, kern.kind, kern.prm, blocked)
     ref = np.zeros(model.ndofs)
     _element_at_a_time(kern, x, 0, ne, ref)
     assert np.array_equal(blocked, ref)
     part = np.zeros(model.ndofs)
     DB, first = B.blocks(g.Dm_inv, g.V, [0, 7, ne - 3])  # the middle range's blocks start at 7
-    B.gradient_range(x, g.X, g.nodes, DB, first[1], kern.kind, kern.prm, 7, ne - 3, part)
+    B.gradient_range(x - g.X, g.nodes, DB, first[1], kern.kind, kern.prm, 7, ne - 3, part)
     ref = np.zeros(model.ndofs)
     _element_at_a_time(kern, x, 7, ne - 3, ref)
     assert np.array_equal(part, ref)
@@ -135,11 +135,11 @@ def test_partitioned_gradient_matches_the_serial_one(n_parts):
     x = _bent(model)
     k, g = kern._g, kern.geo
     serial = np.empty(model.ndofs)
-    k.gradient_p1(x, g.X, g.nodes, g.blocks, kern.kind, kern.prm, serial)
+    k.gradient_p1(x, g.X, np.empty(model.ndofs), g.nodes, g.blocks, kern.kind, kern.prm, serial)
     parts = g.parts(n_parts)
     threaded = np.empty(model.ndofs)
-    k.gradient_p1_parts(x, g.X, parts.nodes, parts.DB, parts.first_block, kern.kind, kern.prm,
-                        parts.part_start, threaded)
+    k.gradient_p1_parts(x, g.X, np.empty(model.ndofs), parts.nodes, parts.DB, parts.first_block,
+                        kern.kind, kern.prm, parts.part_start, threaded)
     assert np.max(np.abs(threaded - serial)) <= REORDER_RTOL * np.max(np.abs(serial))
     # the parts' interiors touch disjoint vertex sets (what makes the scatter race-free)
     start = parts.part_start

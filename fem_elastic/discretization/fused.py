@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 import weakref
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable
@@ -339,6 +340,9 @@ class FusedP1:
         from . import _fused_gradient_kernels  # numba is importable: _kernels() loaded it
 
         self._g = _fused_gradient_kernels
+        # u = x - X for the force loop: one buffer per calling thread (a FusedP1 may be shared by
+        # Python threads, e.g. solve_static in a pool), made on its first call
+        self._scratch = threading.local()
         self.kind = getattr(self._k, name.upper())
         self.prm = params(material)
         entry = _cache.get(space)
@@ -370,12 +374,15 @@ class FusedP1:
         g = self.geo
         out = _out_array(out, g.ndofs)
         n_threads = _threads(g.nodes.shape[0])
+        u = getattr(self._scratch, "u", None)
+        if u is None:
+            u = self._scratch.u = np.empty(g.ndofs)
         if n_threads > 1:
             c = g.parts(n_threads)
-            self._g.gradient_p1_parts(self._x(x), g.X, c.nodes, c.DB, c.first_block, self.kind,
+            self._g.gradient_p1_parts(self._x(x), g.X, u, c.nodes, c.DB, c.first_block, self.kind,
                                       self.prm, c.part_start, out)
         else:
-            self._g.gradient_p1(self._x(x), g.X, g.nodes, g.blocks, self.kind, self.prm, out)
+            self._g.gradient_p1(self._x(x), g.X, u, g.nodes, g.blocks, self.kind, self.prm, out)
         return out
 
     def hessian(self, x: np.ndarray, pattern, project: bool = False):
