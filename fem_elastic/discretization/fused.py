@@ -61,6 +61,7 @@ import os
 import threading
 import weakref
 from dataclasses import dataclass
+from functools import cached_property
 from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
@@ -240,17 +241,14 @@ class _P1Geometry:
         self.X = _frozen(space.X, float)  # (ndofs,)
         self.ndofs = space.ndofs
         self._parts: dict[int, _PartitionedP1] = {}
-        self._blocks: np.ndarray | None = None
 
-    @property
+    @cached_property
     def blocks(self) -> np.ndarray:
         """Dm^-1 and V in the force loop's block layout (:func:`._fused_gradient_kernels.blocks`;
         built on first use, 80 bytes per element)."""
-        if self._blocks is None:
-            from . import _fused_gradient_kernels as kb
+        from . import _fused_gradient_kernels as kb
 
-            self._blocks = _frozen(kb.blocks(self.Dm_inv, self.V, [0, self.nodes.shape[0]])[0], float)
-        return self._blocks
+        return _frozen(kb.blocks(self.Dm_inv, self.V, [0, self.nodes.shape[0]])[0], float)
 
     def parts(self, n_parts: int) -> "_PartitionedP1":
         """The elements split into ``n_parts`` parts, for the threaded gradient (built on first use)."""

@@ -9,7 +9,7 @@ constant load density times the integral of each scalar shape function.
 from __future__ import annotations
 
 import numpy as np
-from skfem import FacetBasis, LinearForm
+from skfem import FacetBasis, LinearForm, MeshTet1
 
 from ..discretization.space import Discretization
 from ..errors import InvalidParameter
@@ -95,7 +95,7 @@ def facet_shape_integrals(space: Discretization, facets: np.ndarray) -> np.ndarr
     """
     mesh = space.mesh
     facets = np.asarray(facets, dtype=np.int64)
-    if type(mesh).__name__ != "MeshTet1" or space.order not in (1, 2):
+    if type(mesh) is not MeshTet1:  # exactly: MeshTet2 (curved) derives from it
         fb = FacetBasis(mesh, space.element, facets=facets, intorder=2 * space.order)
         return _shape_integral.assemble(fb)
     tri = mesh.facets[:, facets]  # (3, nf) vertex indices
@@ -107,4 +107,4 @@ def facet_shape_integrals(space: Discretization, facets: np.ndarray) -> np.ndarr
         nodes = dofs.nodal_dofs[0][tri]
     else:
         nodes = dofs.edge_dofs[0][mesh.f2e[:, facets]]
-    return np.bincount(nodes.ravel(), weights=np.tile(area / 3.0, 3), minlength=dofs.N).astype(float)
+    return np.bincount(nodes.ravel(), weights=np.tile(area / 3.0, 3), minlength=dofs.N)
