@@ -32,8 +32,8 @@ the timings. Memory per rank: the resident set size after the imports and that w
 (``rss_base``), right after the first model build (``rss_model``; minus ``rss_base``: the
 replicated part), after the first PC setup
 (``rss_pc``), the peak (``ru_maxrss``) after the first repeat (``rss_peak1``: one model,
-one set-up, one solve and one ``solve_static``) and at the end (``rss_peak``: it grows with
-the repeats, the allocator keeping what earlier repeats freed), in MiB. Only rank 0 prints. BLAS and
+one set-up, one solve and one ``solve_static``) and at the end (``rss_peak``; each repeat's
+model and PETSc objects are released before the next), in MiB. Only rank 0 prints. BLAS and
 numba run ``--threads`` threads per rank (default 1: one core a rank).
 
 Usage::
@@ -197,6 +197,7 @@ def main(argv=None) -> int:
         os.environ[var] = str(args.threads)  # read when numba / BLAS first load
 
     import fem_elastic as fe
+    from fem_elastic.solvers import distributed
     from fem_elastic.solvers.distributed import DistributedProblem
     from fem_elastic.solvers.partition import partition_elements
     from fem_elastic.solvers.petsc_solver import comm_world
@@ -304,8 +305,7 @@ def main(argv=None) -> int:
         info.setdefault("static_cg_iterations", []).append(int(res.linear_iterations))
         info.setdefault("static_converged", []).append(bool(res.converged))
         info["tip_deflection_m"] = float(-res.displacement[:, 2].min())
-        for p in fresh.__dict__.get("_distributed_problems", {}).values():
-            p.destroy()
+        distributed.release(fresh)  # its matrix and vectors, now
         fresh = res = None
         if rep == 0:
             info["rss_peak1"] = rss_peak_mib()  # the peak of one cycle, before any repeat

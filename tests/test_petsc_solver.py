@@ -43,6 +43,8 @@ def test_one_rank_static_equals_the_serial_solve_linear_and_neo_hookean():
         r = fe.solve_static(m, linear_solver="petsc", rtol=1e-11)  # the scene name works too
         # 1e-8: issue 21's bar; the two stop at 1e-11 of the force scale (measured 1e-13)
         assert np.linalg.norm(r.x - s0.x) < 1e-8 * np.linalg.norm(s0.x - m.X)
+        # rtol: the bar above; atol for the components that vanish (x and y: the loads are along
+        # z), zero to round-off against reactions of ~10 N, where a relative bar means nothing
         assert np.allclose(r.reaction_force("left"), s0.reaction_force("left"), rtol=1e-8, atol=1e-9)
         assert r.converged and r.min_eigenvalue is None and "1 MPI rank" in r.message
 
@@ -166,3 +168,31 @@ def test_mixed_formulation_runs_on_the_distributed_path():
     # both stop at 1e-10 of the load; nu = 0.499 conditions the tangent by ~1e3, hence 1e-7
     # (measured 6.7e-10: one Newton step each, LU against the serial solver)
     assert np.linalg.norm(r.x - s0.x) < 1e-7 * np.linalg.norm(s0.x - m.X)
+
+
+def test_load_steps_on_the_distributed_path_are_the_serial_ones():
+    """steps=10: the distributed load path takes the serial path's load factors, bit for bit
+    (0.1, ..., 1.0 on the grid; it once took 0.9999999999999999 and then 1.0, one solve too many)."""
+    require_mpi()
+    m = _beam(fe.NeoHookean(E=1e6, nu=0.4), traction={"right": (0, 0, -5e2)})
+    serial = fe.solve_static(m, steps=10, stability=False)
+    dist = fe.solve_static(m, linear_solver="petsc", steps=10)
+    assert dist.load_steps == serial.load_steps and len(dist.load_steps) == 10
+
+
+def test_a_model_solved_on_the_distributed_path_is_freed():
+    """The cached distributed problem holds its model weakly: once the caller drops the model,
+    the model and its PETSc objects go (a strong reference kept every solved model alive)."""
+    import gc
+    import weakref
+
+    from fem_elastic.solvers import distributed
+
+    require_mpi()
+    m = _beam(fe.LinearElastic(E=1e7, nu=0.3), traction={"right": (0, 0, -1e3)})
+    fe.solve_static(m, linear_solver="petsc")
+    assert len(distributed._PROBLEMS) >= 1
+    alive = weakref.ref(m)
+    del m
+    gc.collect()
+    assert alive() is None

@@ -84,10 +84,17 @@ class DistributedProblem:
         The mass the matrix carries (implicit steps); None for statics.
     """
 
+    @property
+    def model(self):
+        """The model this problem distributes (alive as long as its caller holds it)."""
+        return self._model()
+
     def __init__(self, model, comm: Any, held: np.ndarray, mass: str | None = None):
         PETSc = petsc()
         self.PETSc = PETSc
-        self.model = model
+        # the model through a weak reference: _PROBLEMS keeps this problem for as long as the
+        # model lives, so a strong one would keep the model (and this problem) alive for ever
+        self._model = weakref.ref(model)
         self.comm = comm
         self.mpi = comm.tompi4py()
         self.rank, self.size = comm.getRank(), comm.getSize()
@@ -355,6 +362,12 @@ def _mpi_land():
 
 
 _PROBLEMS: "weakref.WeakKeyDictionary[Any, dict]" = weakref.WeakKeyDictionary()
+
+
+def release(model) -> None:
+    """Destroy the PETSc objects of the model's distributed problems now (not at garbage collection)."""
+    for problem in _PROBLEMS.pop(model, {}).values():
+        problem.destroy()
 
 
 def distributed_problem(model, comm: Any, held: np.ndarray, mass: str | None = None) -> DistributedProblem:

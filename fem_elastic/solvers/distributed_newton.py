@@ -87,8 +87,9 @@ def minimize(problem, ksp, x, *, s: float = 1.0, y=None, k: float = 0.0, rtol: f
             t0 = time.perf_counter()
             problem.gradient(x, s, y, k, out=g)
             ga = g.getArray()
-            if it == 0:
+            if it == 0:  # as the serial Newton: a non-finite reaction does not set the scale
                 reaction = math.sqrt(problem.allsum(float(ga[~free] @ ga[~free])))
+                reaction = reaction if math.isfinite(reaction) else 0.0
             ga[~free] = 0.0
             gnorm = g.norm()
             result.seconds["linearize"] += time.perf_counter() - t0
@@ -108,7 +109,8 @@ def minimize(problem, ksp, x, *, s: float = 1.0, y=None, k: float = 0.0, rtol: f
                 return result
             eta = min(1e-2, 0.1 * gnorm / result.residual_history[0])
             slope, its = _direction(problem, ksp, x, g, dx, k, exact, eta, result)
-            if not slope < 0.0 and exact:  # the exact tangent gave no descent: project it
+            if not slope < 0.0 and exact and project:  # no descent from the exact tangent: project
+                # (project=False keeps the exact tangent throughout, as the serial Newton does)
                 exact = False
                 slope, its = _direction(problem, ksp, x, g, dx, k, False, eta, result)
             if not slope < 0.0:  # steepest descent, scaled like the Newton step
@@ -260,7 +262,7 @@ def solve_static_distributed(model, solver: PETScSolver, *, rtol: float = 1e-8, 
 def _load_path(model, problem, ksp, t_start, *, rtol, max_iter, project, initial_load_step,
                min_load_step, check, steps):
     """The load steps of :func:`solve_static_distributed` (its KSP made and destroyed there)."""
-    from .static import EquilibriumPoint, StaticResult, _vertex_forces, held_at
+    from .static import EquilibriumPoint, StaticResult, _vertex_forces, held_at, next_load_factor
 
     x = problem.to_vec(model.X)
     # the problem's force scale: the load, plus what the prescribed displacements exert at rest
@@ -294,9 +296,7 @@ def _load_path(model, problem, ksp, t_start, *, rtol, max_iter, project, initial
                                 iterations=its, _model=model)
 
     total.path.append(point(x, 0.0, 0))
-    max_ds = 1.0 if steps is None else 1.0 / steps
-    if steps is not None and initial_load_step == 1.0:
-        initial_load_step = max_ds
+    max_ds = 1.0 if steps is None else 1.0 / steps  # (solve_static set initial_load_step for steps)
     s, ds = 0.0, float(min(initial_load_step, max_ds))
     if g_scale_full == 0.0:
         s = 1.0
@@ -304,9 +304,7 @@ def _load_path(model, problem, ksp, t_start, *, rtol, max_iter, project, initial
         total.path.append(point(x, 1.0, 0))
         total.message = "no load: the rest state"
     while s < 1.0:
-        target = min(1.0, s + ds)
-        if steps is not None:
-            target = min(target, (math.floor(s * steps * (1 + 1e-12)) + 1) / steps)
+        target = next_load_factor(s, ds, steps)  # the serial load path's rule, grid snap included
         x_try = x.duplicate()
         x.copy(x_try)
         _set_held(problem, x_try, held_at(model, model.X, target))

@@ -47,6 +47,7 @@ from ..errors import InvalidParameter, NotConverged
 from ..physics.impulse_contact import reject_impulse_contact
 from .linear_solvers import LinearSolverFailed, SingularMatrix, as_linear_solver
 from .newton import constrain, newton_minimize
+from .petsc_solver import PETScSolver  # cheap: petsc4py is imported on its first solve
 from .stability import UnstableEquilibrium, lowest_eigenpair
 from .static_view import StaticResultView
 
@@ -363,6 +364,16 @@ def _contact_max_step(model):
     return model.max_step
 
 
+def next_load_factor(s: float, ds: float, steps: int | None) -> float:
+    """``s + ds``, not past 1 nor the next point ``k / steps``, snapped onto that grid (10 x 0.1 = 1)."""
+    target = min(1.0, s + ds)
+    if steps is not None:
+        target = min(target, (math.floor(s * steps * (1 + 1e-12)) + 1) / steps)
+        snap = round(target * steps) / steps
+        target = snap if abs(target - snap) < 1e-12 else target
+    return target
+
+
 def _predictor(model, problem, x, s, target, solver, near_null, pattern, seconds):
     """The start of a step that moves prescribed DOFs: the linear response of the free DOFs.
 
@@ -514,15 +525,15 @@ def solve_static(
             f"initial_load_step={initial_load_step!r}, min_load_step={min_load_step!r}."
         )
     reject_impulse_contact(model, "fe.solve_static")
-    if linear_solver == "petsc" or type(linear_solver).__name__ == "PETScSolver":
+    if isinstance(linear_solver, str):
+        linear_solver = as_linear_solver(linear_solver)  # a name: its solver ("petsc" included)
+    if isinstance(linear_solver, PETScSolver):
         from .distributed_newton import solve_static_distributed  # across MPI ranks: its own module
-        from .petsc_solver import PETScSolver
 
-        petsc_solver = PETScSolver() if isinstance(linear_solver, str) else cast(PETScSolver, linear_solver)
         if stability:
             log.info("solve_static with fe.PETScSolver: no stability check on the distributed path")
         _check_conditioning(model)  # the RoundoffWarning of a nearly incompressible body, as serially
-        return solve_static_distributed(model, petsc_solver, rtol=rtol, max_iter=max_iter, project=project,
+        return solve_static_distributed(model, linear_solver, rtol=rtol, max_iter=max_iter, project=project,
                                         initial_load_step=initial_load_step, min_load_step=min_load_step,
                                         check=check, steps=steps, stabilize=stabilize)
     model.check_supported()
@@ -570,12 +581,7 @@ def solve_static(
         total.message = "no load: the rest state"
     failed = None  # (x, load factor) of the last failed attempt: what the diagnosis looks at
     while s < 1.0:
-        target = min(1.0, s + ds)
-        if steps is not None:  # do not step over the next point of the grid
-            k_next = math.floor(s * steps * (1 + 1e-12)) + 1
-            target = min(target, k_next / steps)
-            if abs(target - round(target * steps) / steps) < 1e-12:
-                target = round(target * steps) / steps
+        target = next_load_factor(s, ds, steps)
         x0, pred = _predictor(model, problem, x, s, target, solver, near_null, pattern, total.seconds)
         max_step = _contact_max_step(model)
         fraction = 1.0 if max_step is None else max_step(x, x0 - x)  # CCD of the start, once

@@ -31,6 +31,7 @@ from ...solvers.linear_solvers import AutoSolver, as_linear_solver
 from ...materials import Corotated
 from ...physics.impulse_contact import reject_impulse_contact
 from ...solvers.newton import NewtonResult, _direction, newton_minimize
+from ...solvers.petsc_solver import PETScSolver
 from ...solvers.static import _contact_max_step
 from ..state import State
 from .base import Integrator, StepStats, check_dt, check_state
@@ -203,7 +204,8 @@ class ImplicitEuler(_Implicit):
         return G.y.copy()
 
     def _try(self, model, state, h, stats):
-        if type(self.linear_solver).__name__ == "PETScSolver" and type(self) is ImplicitEuler:
+        # (Newmark and the trapezoid share this step but not its objective: they stay serial)
+        if isinstance(self.linear_solver, PETScSolver) and type(self) is ImplicitEuler:
             return self._try_distributed(model, state, h, stats)
         free, dofs, xc, vc = self._start(model, state, h)
         G = self._objective(model, state, h)
