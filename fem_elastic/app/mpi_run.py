@@ -16,7 +16,6 @@ the same command itself; without an MPI launcher on the PATH it is a
 
 from __future__ import annotations
 
-import os
 import shutil
 import subprocess
 import sys
@@ -87,4 +86,4 @@ def relaunch(argv: list[str], ranks: int) -> int:
     if launcher_world()[1] > 1:
         raise InvalidParameter("--ranks is for a command started without mpiexec; under mpiexec "
                                "the number of ranks is mpiexec's -n.")
-    return subprocess.run(relaunch_command(argv, ranks), env=os.environ.copy(), check=False).returncode
+    return subprocess.run(relaunch_command(argv, ranks), check=False).returncode  # this environment
