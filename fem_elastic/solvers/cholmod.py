@@ -206,13 +206,10 @@ class CholmodSolver:
         if not same_values:
             self._unpublish()  # the factor is about to change (or be replaced): nobody may use it
         if not same_pattern:
-            # supernodal, always: an LL' factorisation, whose failure on a matrix that is not
-            # positive definite is Newton's test of an exact tangent. CHOLMOD's simplicial mode
-            # (its "auto" choice for small, banded matrices: 2 ms faster on a 1,485-DOF P2 beam)
-            # factors LDL', which does not fail there; with the sign of D's pivots as the test it
-            # passed the suite, but it moved the integrators notebook's fitted RK4 order past its
-            # tolerance (4.102 against 4 +- 0.1), not yet understood, so it was withdrawn.
-            self._factor = self._cholmod.analyze(C, mode="supernodal")
+            # CHOLMOD's own choice of supernodal (LL') or simplicial (LDL', where the flops per
+            # entry of L stay below 40: small or banded matrices; a 1,485-DOF P2 beam analyses and
+            # factors in 5.4 against 7.2 ms)
+            self._factor = self._cholmod.analyze(C, mode="auto")
             self._pattern = (C.shape, C.indptr.copy(), C.indices.copy())
             self._values = self._kind = self._solver = None
             self.analyses += 1
@@ -221,6 +218,12 @@ class CholmodSolver:
             return self._solver, 0
         try:
             self._factor.cholesky_inplace(C)
+            # LL' fails on a matrix that is not positive definite (Newton's test of an exact
+            # tangent); simplicial LDL' does not: its D then has a pivot <= 0, which says the same
+            # (D() reads the factor's diagonal in place; for LL' it is diag(L)^2 > 0)
+            if not np.all(self._factor.D() > 0.0):
+                raise self._cholmod.CholmodNotPositiveDefiniteError(
+                    "a pivot of the LDL' factorisation is not positive")
         except self._cholmod.CholmodNotPositiveDefiniteError as exc:
             self.factorizations += 1
             self._values = self._kind = self._solver = None
