@@ -773,16 +773,15 @@ def beam_mesh(
             "here. Use fewer cells."
         ) from None
     # init_tensor puts the end coordinates exactly (linspace endpoints), but
-    # compare with a tolerance relative to the cell size to be robust.
+    # compare with a tolerance relative to the cell size to be robust. The box is
+    # convex, so a facet whose midpoint lies on one of its planes lies in it: every
+    # such facet is a boundary facet, and the midpoints are tested once for all six
+    # (skfem's with_boundaries of six tests took 1.1 ms of a 1.3 ms 27x1x1 beam).
     tol = [1e-9 * d / n for d, n in zip(dims, cells)]
-    L, W, H = dims
-    return mesh.with_boundaries(
-        {
-            "left": lambda x: np.abs(x[0]) < tol[0],
-            "right": lambda x: np.abs(x[0] - L) < tol[0],
-            "front": lambda x: np.abs(x[1]) < tol[1],
-            "back": lambda x: np.abs(x[1] - W) < tol[1],
-            "bottom": lambda x: np.abs(x[2]) < tol[2],
-            "top": lambda x: np.abs(x[2] - H) < tol[2],
-        }
-    )
+    midpoints = mesh.p[:, mesh.facets].mean(axis=1)
+    planes = {"left": (0, 0.0), "right": (0, dims[0]), "front": (1, 0.0), "back": (1, dims[1]),
+              "bottom": (2, 0.0), "top": (2, dims[2])}
+    return mesh.with_boundaries({
+        name: np.flatnonzero(np.abs(midpoints[axis] - at) < tol[axis]).astype(np.int32)
+        for name, (axis, at) in planes.items()
+    })
