@@ -156,6 +156,27 @@ def energy_p2(x, X, nodes, Dm_inv, dx, G, kind, prm):
     return total + block
 
 
+@_jit_inline
+def _add_linear_block(K, dN, wlam, wmu):
+    """K[3a+i, 3b+k] += w (lam dN_a,i dN_b,k + mu dN_a,k dN_b,i + mu delta_ik dN_a . dN_b), b >= a.
+
+    The linear elastic tangent at one quadrature point, ``wlam = w lam`` and ``wmu = w mu``
+    (w the point's weight times volume, m^3; lam, mu in Pa; dN in 1/m): ``B^T C B`` written out
+    for the isotropic ``C = lam I (x) I + 2 mu sym``, the same terms as the general path sums,
+    in another order.
+    """
+    for a in range(NLOC):
+        for b in range(a, NLOC):
+            dot = wmu * (dN[a, 0] * dN[b, 0] + dN[a, 1] * dN[b, 1] + dN[a, 2] * dN[b, 2])
+            for i in range(3):
+                row = 3 * a + i
+                for k in range(3):
+                    v = wlam * dN[a, i] * dN[b, k] + wmu * dN[a, k] * dN[b, i]
+                    if i == k:
+                        v += dot
+                    K[row, 3 * b + k] += v
+
+
 @_jit
 def hessian_p2(x, X, nodes, Dm_inv, dx, G, kind, prm, project, indptr, off, data):
     """data = the CSR data of sum_e K_e (overwritten), K_e added through ``indptr`` and ``off``.
@@ -178,6 +199,9 @@ def hessian_p2(x, X, nodes, Dm_inv, dx, G, kind, prm, project, indptr, off, data
         D = Dm_inv[e]
         for q in range(G.shape[0]):
             _point_gradients(G, q, D, dN)
+            if kind == _k.LINEAR:  # C = lam I (x) I + 2 mu sym: K_e in closed form, 3x fewer flops
+                _add_linear_block(K, dN, dx[e, q] * prm[1], dx[e, q] * prm[0])
+                continue
             tangent(kind, _point_F(u, dN), prm, C)
             if project and kind != _k.LINEAR:
                 project_psd(C, L, Q, w9)
@@ -221,9 +245,9 @@ class _P2Geometry:
         self.nodes = _frozen(nodes.T, np.int64)
         # d xi / d x of the element's affine map xi -> x0 + Dm xi: scikit-fem's own inverse
         # Jacobian (MappingAffine.invA, (3, 3, ne)), not a second inversion of the edge matrices
-        self.Dm_inv = _frozen(np.asarray(space.scalar_basis.mapping.invA).transpose(2, 0, 1), float)
+        self.Dm_inv = _frozen(np.asarray(space.mapping.invA).transpose(2, 0, 1), float)
         self.dx = _frozen(space.dx, float)  # (ne, nq)
-        points = space.scalar_basis.quadrature[0]  # (3, nq) reference points
+        points = space.quadrature[0]  # (3, nq) reference points
         G = np.stack([space.element.lbasis(points, a)[1] for a in range(NLOC)])  # (10, 3, nq)
         self.G = _frozen(G.transpose(2, 0, 1), float)  # (nq, 10, 3)
         self.X = _frozen(space.X, float)

@@ -159,7 +159,7 @@ def _node_field(model, value, name: str) -> np.ndarray:
         out[space.vertex_dofs[:, 0] // 3] = arr
         if nn > nv:  # P2: edge nodes follow the mean of their edge's vertices
             edges = model.mesh.edges
-            out[np.asarray(space.scalar_basis.edge_dofs)[0]] = 0.5 * (arr[edges[0]] + arr[edges[1]])
+            out[np.asarray(space.dofs.edge_dofs)[0]] = 0.5 * (arr[edges[0]] + arr[edges[1]])
         return out.ravel()
     shapes = f"({nn}, 3)" if nn == nv else f"({nn}, 3) (every node) or ({nv}, 3) (the vertices)"
     raise InvalidParameter(

@@ -87,7 +87,7 @@ def facet_shape_integrals(space: Discretization, facets: np.ndarray) -> np.ndarr
     integrals have a closed form: A/3 at each corner for P1; for P2, A/3 at
     each edge midpoint and 0 at the corners (the quadratic Lagrange
     triangle's corner functions integrate to zero), on the nodes as
-    ``space.scalar_basis`` numbers them (checked against scikit-fem's
+    ``space.dofs`` numbers them (checked against scikit-fem's
     quadrature in the tests). Other meshes (curved geometry) go through
     scikit-fem's ``FacetBasis``. The closed form is exact and skips building a facet basis:
     2-4 ms of the 20 ms a small P2 static solve takes
@@ -102,7 +102,7 @@ def facet_shape_integrals(space: Discretization, facets: np.ndarray) -> np.ndarr
     p = mesh.p
     area = 0.5 * np.linalg.norm(np.cross(p[:, tri[1]] - p[:, tri[0]], p[:, tri[2]] - p[:, tri[0]],
                                          axis=0), axis=0)
-    dofs = space.scalar_basis.dofs
+    dofs = space.dofs
     if space.order == 1:
         nodes = dofs.nodal_dofs[0][tri]
     else:

@@ -134,7 +134,7 @@ def nodes_of(space, where, what: str = "fixed") -> np.ndarray:
         nodes = []
         for name in names:
             facets = boundary_facets(mesh, name, what=what)
-            nodes.append(np.asarray(space.scalar_basis.get_dofs(facets).all()).ravel())
+            nodes.append(np.asarray(space.dofs.get_facet_dofs(facets).all()).ravel())
         return np.unique(np.concatenate(nodes)).astype(np.int64)
     try:
         arr = np.asarray(where)
@@ -157,10 +157,10 @@ def nodes_of(space, where, what: str = "fixed") -> np.ndarray:
         mask[arr] = True
     else:
         raise InvalidParameter(f"{what} must be {FIXED_FORMS}; got {where!r}.")
-    nodes = [np.asarray(space.scalar_basis.nodal_dofs[0])[mask]]
+    nodes = [np.asarray(space.dofs.nodal_dofs[0])[mask]]
     if space.order == 2:
         edge_on = mask[mesh.edges].all(axis=0)
-        nodes.append(np.asarray(space.scalar_basis.edge_dofs)[0, edge_on])
+        nodes.append(np.asarray(space.dofs.edge_dofs)[0, edge_on])
     return np.unique(np.concatenate(nodes)).astype(np.int64)
 
 

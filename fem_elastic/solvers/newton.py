@@ -57,6 +57,7 @@ failure.
 
 from __future__ import annotations
 
+import functools
 import inspect
 import logging
 import math
@@ -75,10 +76,20 @@ __all__ = ["NewtonResult", "newton_minimize"]
 
 def _takes_rtol(solver) -> bool:
     """Whether ``solver.solve`` accepts an ``rtol`` keyword (ours do; a user's may not)."""
+    method = solver.solve
+    func = getattr(method, "__func__", None)  # a method: the signature is its class's function's
+    return _has_rtol(method) if func is None else _function_has_rtol(func)
+
+
+def _has_rtol(func) -> bool:
     try:
-        return "rtol" in inspect.signature(solver.solve).parameters
+        return "rtol" in inspect.signature(func).parameters
     except (TypeError, ValueError):
         return False
+
+
+# inspect.signature took 0.14 ms a call, twice per static solve: a class's answer is kept
+_function_has_rtol = functools.lru_cache(maxsize=64)(_has_rtol)
 
 log = logging.getLogger(__name__)
 

@@ -116,7 +116,7 @@ def _vertex_forces(space, f: np.ndarray) -> np.ndarray:
     fv = f[space.vertex_dofs].copy()
     if space.order == 2:
         mesh = space.mesh
-        edge_nodes = np.asarray(space.scalar_basis.edge_dofs)[0]
+        edge_nodes = np.asarray(space.dofs.edge_dofs)[0]
         fe_ = f.reshape(-1, 3)[edge_nodes]  # (n_edges, 3)
         for end in (0, 1):
             np.add.at(fv, mesh.edges[end], 0.5 * fe_)
