@@ -88,12 +88,17 @@ def compare(label, with_ipc, without, state, dt, repeats, solver=None):
     return m_ipc / m_free
 
 
-def trace_first_step(model, state, dt, solver=None):
-    """One first-contact step with Newton's debug log and the CCD bound of every Newton step."""
+def trace_step(label, model, state, dt, solver=None):
+    """One step with Newton's debug log and the CCD bound of every Newton step.
+
+    Each CCD line gives the collision-free fraction of the step, and at the step's start the
+    minimum distance, the active pairs and kappa; each Newton line ||g|| on the free DOFs (N)
+    before the step, the step fraction taken and the incremental potential after it."""
     import logging
 
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
-    logging.getLogger("fem_elastic.solvers.newton").setLevel(logging.DEBUG)
+    newton_log = logging.getLogger("fem_elastic.solvers.newton")
+    newton_log.setLevel(logging.DEBUG)
     contact = model.contact
     bound = contact.max_step
 
@@ -105,8 +110,15 @@ def trace_first_step(model, state, dt, solver=None):
         return a
 
     contact.max_step = max_step
-    t, stats, _ = time_step(model, state, dt, solver)
-    print(f"first contact with IPC: {t:.2f} s, {_breakdown(stats)}")
+    try:
+        t, stats, out = time_step(model, state, dt, solver)
+    finally:
+        del contact.max_step  # the bound method again
+        newton_log.setLevel(logging.NOTSET)
+    d = contact.diagnostics(out.x)
+    print(f"{label} with IPC: {t:.2f} s, {_breakdown(stats)}; at its end minimum distance "
+          f"{d['min_distance']:.3e} m, {d['active_contacts']} pairs")
+    return out
 
 
 def broad_phase_scaling(sizes, repeats):
@@ -143,8 +155,9 @@ def main(argv=None):
                     help="linear solver of both steps (default fe.AutoSolver: direct below 20k DOFs)")
     ap.add_argument("--no-broad-phase", action="store_true", help="skip the broad-phase scaling")
     ap.add_argument("--trace", action="store_true",
-                    help="only the first-contact step, once, logging each Newton iteration "
-                         "(||g||, step fraction, exact or projected) and each CCD bound")
+                    help="only the first-contact step and the resting step, once each, logging "
+                         "each Newton iteration (||g||, step fraction, exact or projected) and "
+                         "each CCD bound")
     args = ap.parse_args(argv)
     n = args.cells or (2 if args.quick else 12)  # 2 * 6 n^3 tets: 96, or 20,736
     solver = {"auto": None, "direct": fe.DirectSolver(), "amg": fe.AMGSolver()}[args.solver]
@@ -154,8 +167,17 @@ def main(argv=None):
     without = model_of(mesh, n_lower, None)
     state = fe.State.rest(with_ipc)
     d = with_ipc.contact.diagnostics(with_ipc.X)
+    settle = 2 if args.quick else 5  # IPC steps before the resting step
     if args.trace:
-        trace_first_step(with_ipc, state, dt, solver)
+        # the resting step's third Newton iteration: a pair's barrier force goes as 1/d, and a
+        # Newton step on it squares the relative error of the gap (at 12 cells the minimum
+        # distance goes 4.64, 5.08, 5.12, 5.12e-8 m: errors 9 %, 0.9 %, 0.02 %, and ||g|| 0.32,
+        # 0.078, 7.3e-4, 6.5e-8 N), so three full steps reach the tolerance (1e-8 * 12.9 N there)
+        out = trace_step("first contact", with_ipc, state, dt, solver)
+        ie = fe.ImplicitEuler(max_iter=200, linear_solver=solver)
+        for _ in range(settle - 1):  # to the state the timed resting step starts from
+            out = ie.step(with_ipc, out, dt)
+        trace_step("resting contact", with_ipc, out, dt, solver)
         return
     print(f"mesh: {mesh.t.shape[1]} tets, {with_ipc.ndofs} DOFs, "
           f"{with_ipc.collision_surface().n_vertices} surface vertices, {d['active_contacts']} "
@@ -166,7 +188,6 @@ def main(argv=None):
     print(f"ratio (IPC / no contact): {ratio:.2f}x  (goal <= 1.5x)")
     # a step in resting contact: after `settle` steps of IPC (the same step timed without contact
     # from the same state, where the elastic problem is the same)
-    settle = 2 if args.quick else 5
     ie = fe.ImplicitEuler(max_iter=200, linear_solver=solver)
     for _ in range(settle):
         state = ie.step(with_ipc, state, dt)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import types
@@ -315,6 +316,22 @@ def test_bench_ipc_quick_prints_its_figures():
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "ratio (IPC / no contact)" in r.stdout and "fitted exponent" in r.stdout
+
+
+def test_bench_ipc_trace_logs_both_steps():
+    """--trace: each Newton iteration and CCD bound of the first-contact and the resting step."""
+    script = Path(__file__).resolve().parent.parent / "scripts" / "bench_ipc.py"
+    # one stream, unbuffered: the Newton log (stderr) in order with the prints (stdout)
+    r = subprocess.run([sys.executable, str(script), "--quick", "--trace"],
+                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=300,
+                       env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    assert r.returncode == 0, r.stdout
+    first, _, rest = r.stdout.partition("first contact with IPC")
+    assert "Newton 0: ||g||" in first and "resting contact with IPC" in rest
+    # the resting step alone: its iterations, each after the CCD bound of its step (the settling
+    # steps between the two are not logged)
+    rest = rest.split("\n", 1)[1]
+    assert rest.count("CCD: collision-free fraction") >= 2 and rest.count("Newton ") >= 2
 
 
 # --- adaptive stiffness and Newton's convergence in contact --------------------------------------
