@@ -228,3 +228,27 @@ def test_symmetric_quarter_model_equals_the_full_model(order):
     np.testing.assert_allclose(4 * quarter.reaction_force("left")[0], full.reaction_force("left")[0],
                                rtol=1e-8)
     np.testing.assert_allclose(full.reaction_force("left")[0], -t[0] * w * h, rtol=1e-8)
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_facet_nodes_and_edges_are_scikit_fems(order):
+    # The space finds a face's nodes and edges by searching scikit-fem's sorted edge list
+    # (instead of its facet-to-edge map): the same sets as scikit-fem's own get_dofs and f2e,
+    # on a structured beam and on an unstructured mesh (random vertex numbering)
+    from fem_elastic.discretization.space import Discretization
+
+    rng = np.random.default_rng(3)
+    beam = fe.beam_mesh(0.5, 0.2, 0.1, cells=(4, 3, 2))
+    perm = rng.permutation(beam.p.shape[1])  # renumber the vertices: edges no longer grid-ordered
+    inv = np.empty_like(perm)
+    inv[perm] = np.arange(perm.size)
+    shuffled = MeshTet(beam.p[:, perm], inv[beam.t])
+    for mesh in (beam, shuffled):
+        space = Discretization(mesh, order)
+        assert space._edge_keys is not None  # the sorted-list path, not the fallback
+        facets = mesh.boundary_facets()
+        for chosen in (facets, facets[:5], facets[rng.permutation(facets.size)[:17]]):
+            expected = np.unique(np.asarray(space.scalar_basis.get_dofs(chosen).all()))
+            np.testing.assert_array_equal(space.facet_nodes(chosen), expected)
+            np.testing.assert_array_equal(np.sort(space.facet_edges(chosen), axis=0),
+                                          np.sort(np.asarray(mesh.f2e)[:, chosen], axis=0))

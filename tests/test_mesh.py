@@ -239,3 +239,13 @@ def test_a_very_short_edge_is_not_a_crack_but_coincident_vertices_are():
     t2 = np.array([[0, 1, 2, 3], [5, 2, 3, 4]])
     with pytest.raises(InvalidMesh, match=r"1 pair\(s\) of vertices coincide"):
         mesh_from_arrays(p2, t2, reorient=True)
+
+
+def test_beam_mesh_facets_are_those_scikit_fem_builds():
+    # beam_mesh hands its named copy the facets it built to name the faces (scikit-fem drops
+    # them with the copy): they must be what scikit-fem builds for the same tets
+    mesh = beam_mesh(0.7, 0.3, 0.2, (5, 2, 3))
+    fresh = MeshTet(mesh.p.copy(), mesh.t.copy())
+    np.testing.assert_array_equal(mesh.facets, fresh.facets)
+    np.testing.assert_array_equal(mesh.t2f, fresh.t2f)
+    np.testing.assert_array_equal(mesh.boundary_facets(), fresh.boundary_facets())

@@ -296,6 +296,42 @@ class Discretization:
         """Flat, sorted DOFs of the given scalar nodes (vertices and, for P2, edge nodes)."""
         return np.sort(self.vector_dofs(np.ravel(nodes)).ravel())
 
+    def facet_edges(self, facets: np.ndarray) -> np.ndarray:
+        """``(3, nf)`` edge indices of the given facets (their order within a facet is arbitrary).
+
+        Looked up in the mesh's edge list, which scikit-fem keeps sorted (each edge's vertices
+        ascending, the edges lexicographically): scikit-fem's facet-to-edge map, built for
+        every facet, took 0.5 ms of a 3.5 ms model of 162 P2 tets for the few facets of a
+        face. Falls back to that map if the list is not sorted.
+        """
+        mesh = self.mesh
+        facets = np.asarray(facets, dtype=np.int64)
+        keys = self._edge_keys
+        if keys is None:
+            return np.asarray(mesh.f2e)[:, facets]
+        nv = mesh.p.shape[1]
+        f = np.sort(np.asarray(mesh.facets)[:, facets].astype(np.int64), axis=0)
+        wanted = np.stack([f[0] * nv + f[1], f[1] * nv + f[2], f[0] * nv + f[2]])
+        idx = np.minimum(np.searchsorted(keys, wanted), keys.size - 1)
+        if not np.array_equal(keys[idx], wanted):  # pragma: no cover - a facet's edge is an edge
+            return np.asarray(mesh.f2e)[:, facets]
+        return idx
+
+    @cached_property
+    def _edge_keys(self) -> np.ndarray | None:
+        """``v0 * nverts + v1`` of each edge, strictly increasing; None if the list is not sorted."""
+        e = np.asarray(self.mesh.edges, dtype=np.int64)
+        keys = e[0] * self.mesh.p.shape[1] + e[1]
+        return keys if (e[0] < e[1]).all() and (np.diff(keys) > 0).all() else None
+
+    def facet_nodes(self, facets: np.ndarray) -> np.ndarray:
+        """Sorted scalar nodes on the given facets: their vertices and, for P2, their edge nodes."""
+        facets = np.asarray(facets, dtype=np.int64)
+        nodes = [np.asarray(self.dofs.nodal_dofs[0])[np.asarray(self.mesh.facets)[:, facets]].ravel()]
+        if self.order == 2:
+            nodes.append(np.asarray(self.dofs.edge_dofs[0])[self.facet_edges(facets)].ravel())
+        return np.unique(np.concatenate(nodes)).astype(np.int64)
+
     @property
     def nloc(self) -> int:
         """Scalar shape functions per element (4 for P1, 10 for P2)."""

@@ -106,5 +106,5 @@ def facet_shape_integrals(space: Discretization, facets: np.ndarray) -> np.ndarr
     if space.order == 1:
         nodes = dofs.nodal_dofs[0][tri]
     else:
-        nodes = dofs.edge_dofs[0][mesh.f2e[:, facets]]
+        nodes = dofs.edge_dofs[0][space.facet_edges(facets)]
     return np.bincount(nodes.ravel(), weights=np.tile(area / 3.0, 3), minlength=dofs.N)

@@ -134,7 +134,7 @@ def nodes_of(space, where, what: str = "fixed") -> np.ndarray:
         nodes = []
         for name in names:
             facets = boundary_facets(mesh, name, what=what)
-            nodes.append(np.asarray(space.dofs.get_facet_dofs(facets).all()).ravel())
+            nodes.append(space.facet_nodes(facets))
         return np.unique(np.concatenate(nodes)).astype(np.int64)
     try:
         arr = np.asarray(where)
