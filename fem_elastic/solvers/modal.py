@@ -260,6 +260,12 @@ def natural_frequencies(model: AnyModel, n: int = 6, *, x: np.ndarray | None = N
       eigenvalues at round-off level (frequencies many orders below the
       first elastic one, not exactly 0), first in the list.
 
+    Each eigenvalue is then refined as the Rayleigh quotient of its mode
+    shape with K and M, ``K phi`` summed in extended precision: the first
+    frequency of a slender body is then good to ~1e-16 relative, the same
+    whichever factorisation ARPACK inverted with (its own values err by
+    ~1e-13 there).
+
     Parameters
     ----------
     model : Model
