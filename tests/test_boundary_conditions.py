@@ -252,3 +252,32 @@ def test_facet_nodes_and_edges_are_scikit_fems(order):
             np.testing.assert_array_equal(space.facet_nodes(chosen), expected)
             np.testing.assert_array_equal(np.sort(space.facet_edges(chosen), axis=0),
                                           np.sort(np.asarray(mesh.f2e)[:, chosen], axis=0))
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_a_boundary_stored_as_a_facet_mask_is_its_facets(order):
+    # scikit-fem accepts a boolean mask over the facets as a named boundary: supports and
+    # tractions on it act on the facets it marks (not on facets 0 and 1)
+    beam = fe.beam_mesh(0.5, 0.1, 0.1, cells=(4, 2, 2))
+    mask = np.zeros(beam.facets.shape[1], dtype=bool)
+    mask[beam.boundaries["left"]] = True
+    mesh = beam.with_boundaries({"left_mask": mask})
+    body = fe.ElasticBody(fe.LinearElastic(1e6, 0.3), order=order)
+    by_index = fe.Model(mesh, 1000.0, body, fixed="left", traction={"left": (0.0, 0.0, 1.0)})
+    by_mask = fe.Model(mesh, 1000.0, body, fixed="left_mask", traction={"left_mask": (0.0, 0.0, 1.0)})
+    np.testing.assert_array_equal(by_mask.free, by_index.free)
+    np.testing.assert_array_equal(by_mask.external_force(), by_index.external_force())
+
+
+def test_a_curved_mesh_is_refused_with_the_fix():
+    # the model refuses it when it validates the mesh; the space itself does too (it has no
+    # vertex map for a mesh whose points include the edge nodes)
+    from skfem import MeshTet2
+
+    from fem_elastic.discretization.space import Discretization
+
+    curved = MeshTet2.init_tensor(*(np.linspace(0.0, 1.0, 3),) * 3)
+    with pytest.raises(fe.InvalidMesh, match="MeshTet2.*order=2"):
+        Discretization(curved, 2)
+    with pytest.raises(fe.InvalidMesh, match="MeshTet2"):
+        fe.Model(curved, 1000.0, fe.ElasticBody(fe.LinearElastic(1e6, 0.3), order=2), fixed="left")

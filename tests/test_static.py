@@ -436,3 +436,39 @@ def test_inexact_newton_reaches_the_same_solution_with_fewer_krylov_iterations()
     # both stop at ||g|| <= 1e-8 |f|: the minimisers agree to that relative accuracy
     # divided by the stiffness, far below the 0.1 m deflection
     np.testing.assert_allclose(out[True].x, out[False].x, rtol=0, atol=1e-8)
+
+
+def test_solver_rtol_check_keeps_no_user_solver_alive():
+    # Newton asks once per solve function whether it takes rtol, and keeps the answer weakly:
+    # a user's solve (bound per instance, capturing data) and what it holds must still go away
+    import gc
+    import types
+    import weakref
+
+    from fem_elastic.solvers.newton import _takes_rtol
+
+    class Data:
+        pass
+
+    def make(data, with_rtol):
+        if with_rtol:
+            def solve(self, A, b, near_null=None, rtol=None):
+                return data
+        else:
+            def solve(self, A, b, near_null=None):
+                return data
+        return solve
+
+    class UserSolver:
+        pass
+
+    answers, refs = [], []
+    for with_rtol in (True, False):
+        data, solver = Data(), UserSolver()
+        solver.solve = types.MethodType(make(data, with_rtol), solver)
+        answers.append((_takes_rtol(solver), _takes_rtol(solver)))  # asked, then answered from the cache
+        refs.append(weakref.ref(data))
+        del data, solver
+    gc.collect()
+    assert answers == [(True, True), (False, False)]
+    assert all(r() is None for r in refs)

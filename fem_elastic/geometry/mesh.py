@@ -381,6 +381,8 @@ def boundary_facets(mesh: MeshTet, name: str, *, what: str) -> np.ndarray:
             f"boundaries are {sorted(boundaries)}."
         )
     facets = np.asarray(boundaries[name])
+    if facets.dtype == bool:  # a mask over the facets (scikit-fem accepts one): its indices
+        facets = np.flatnonzero(facets)
     if facets.size == 0:
         raise InvalidParameter(
             f"{what} names boundary {name!r}, which is empty (no facets), so it can "

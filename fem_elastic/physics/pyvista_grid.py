@@ -82,16 +82,16 @@ def _pyvista():
 def _cells(model) -> tuple[np.ndarray, int]:
     """``(m, 4)`` or ``(m, 10)`` node indices of the tets and their VTK type."""
     order = getattr(model.space, "order", 1)
-    basis = getattr(model.space, "scalar_basis", None)
-    if order != 1 and basis is None:  # several bodies (fe.MultiBody), P2 or of mixed orders (None):
+    dofs = getattr(model.space, "dofs", None)  # scikit-fem's DOF map (not its basis: built on demand)
+    if order != 1 and dofs is None:  # several bodies (fe.MultiBody), P2 or of mixed orders (None):
         # no one basis over all of them, and their nodes are not the stacked mesh's vertices
         raise InvalidParameter(
             "to_pyvista of a fe.MultiBody takes linear bodies only (order=1); draw a "
             "quadratic body from its own model, model.models[b].to_pyvista(x[model.body_slice(b)])."
         )
     if order == 2:
-        assert basis is not None  # order 2 without a basis was refused above
-        return np.asarray(basis.element_dofs, dtype=np.int64).T, VTK_QUADRATIC_TETRA
+        assert dofs is not None  # order 2 without a DOF map was refused above
+        return np.asarray(dofs.element_dofs, dtype=np.int64).T, VTK_QUADRATIC_TETRA
     return np.asarray(model.mesh.t, dtype=np.int64).T, VTK_TETRA
 
 

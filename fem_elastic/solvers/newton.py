@@ -57,11 +57,11 @@ failure.
 
 from __future__ import annotations
 
-import functools
 import inspect
 import logging
 import math
 import time
+import weakref
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -77,8 +77,16 @@ __all__ = ["NewtonResult", "newton_minimize"]
 def _takes_rtol(solver) -> bool:
     """Whether ``solver.solve`` accepts an ``rtol`` keyword (ours do; a user's may not)."""
     method = solver.solve
-    func = getattr(method, "__func__", None)  # a method: the signature is its class's function's
-    return _has_rtol(method) if func is None else _function_has_rtol(func)
+    func = getattr(method, "__func__", None)  # a method: the signature is its function's
+    if func is None:
+        return _has_rtol(method)
+    try:
+        known = _RTOL_OF.get(func)
+        if known is None:
+            known = _RTOL_OF[func] = _has_rtol(func)
+        return known
+    except TypeError:  # not weakly referenceable
+        return _has_rtol(func)
 
 
 def _has_rtol(func) -> bool:
@@ -88,8 +96,9 @@ def _has_rtol(func) -> bool:
         return False
 
 
-# inspect.signature took 0.14 ms a call, twice per static solve: a class's answer is kept
-_function_has_rtol = functools.lru_cache(maxsize=64)(_has_rtol)
+# inspect.signature took 0.14 ms a call, twice per static solve: each function's answer is kept,
+# weakly (a user's solve function, and what it holds, may go)
+_RTOL_OF: "weakref.WeakKeyDictionary[Callable, bool]" = weakref.WeakKeyDictionary()
 
 log = logging.getLogger(__name__)
 
