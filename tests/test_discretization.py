@@ -123,3 +123,13 @@ def test_scalar_built_dof_maps_equal_scikit_fems_vector_basis(order):
     dofs = np.arange(space.ndofs)
     # doflocs agree to a few ulps (scikit-fem maps the reference nodes per element)
     np.testing.assert_allclose(space.X, np.asarray(vb.doflocs)[dofs % 3, dofs], rtol=0, atol=1e-15)
+
+
+def test_pattern_diagonal_positions_hold_the_diagonal(space):
+    # found from each node's rank in its node-graph row: the entries there are (d, d)
+    p = space.pattern
+    d = p.diagonal_positions
+    rows = np.repeat(np.arange(p.shape[0]), np.diff(p.indptr))
+    assert d.shape == (p.shape[0],)
+    np.testing.assert_array_equal(rows[d], np.arange(p.shape[0]))
+    np.testing.assert_array_equal(p.indices[d], np.arange(p.shape[0]))

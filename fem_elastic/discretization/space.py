@@ -156,12 +156,16 @@ class SparsityPattern:
     def diagonal_positions(self) -> np.ndarray:
         """Position in the data array of each diagonal entry, ``(ndofs,)``."""
         n = self.shape[0]
-        # every row of a finite-element pattern holds its diagonal (a node couples to itself),
-        # so the positions are where the column is the row: one pass, where a search of the
-        # sorted keys took 1.3 ms of a 20 ms P2 static solve
-        pos = np.flatnonzero(self._row_of == self.indices)
-        if pos.size == n:
-            return pos
+        # every node couples to itself, so each node row of the node graph holds the node: its
+        # rank r there places DOF 3n+i's diagonal at indptr[3n+i] + 3r + i (a pass over the node
+        # graph, 9x smaller than one over the entries, which took 0.26 ms of a 1,485-DOF solve)
+        _, sptr, cols = self._graph
+        nn = sptr.size - 1
+        at = np.flatnonzero(np.repeat(np.arange(nn, dtype=np.int64), np.diff(sptr)) == cols)
+        if at.size == nn:
+            rank = at - sptr[:-1]
+            return (self.indptr[:-1].reshape(nn, 3).astype(np.int64) + 3 * rank[:, None]
+                    + np.arange(3)).ravel()
         keys = self._row_of * n + self.indices.astype(np.int64)
         return np.searchsorted(keys, np.arange(n, dtype=np.int64) * (n + 1))
 

@@ -294,6 +294,7 @@ def newton_minimize(
         result.message = "the starting point is inadmissible (energy is not finite)"
         return result
     exact = not project  # use the exact Hessian this iteration
+    constrained_H = None  # the Hessian constrain() already edited in place (kept when constant)
     for it in range(max_iter + 1):
         t0 = time.perf_counter()
         need_hessian = True
@@ -341,7 +342,10 @@ def newton_minimize(
                                           psd=True, x0=dx)
         else:
             dx, slope, H, exact = _direction_trial(
-                solver, linearize, x, H, g, free, pattern, near_null, result, eta, exact, project)
+                solver, linearize, x, H, g, free, pattern, near_null, result, eta, exact, project,
+                constrained=H is constrained_H)
+            # constrain() edits a matrix of the pattern in place: a kept Hessian needs it once
+            constrained_H = H if pattern is not None and pattern.owns(H) else None
         if not slope < 0:  # still no descent direction: steepest descent
             log.debug("Newton direction is not a descent direction; using -g")
             # keep the Newton step's length; without one, a step of -g / max diag(H)
@@ -396,17 +400,18 @@ def newton_minimize(
     return result
 
 
-def _direction(solver, H, g, free, pattern, near_null, result, rtol=None, psd=None, x0=None):
+def _direction(solver, H, g, free, pattern, near_null, result, rtol=None, psd=None, x0=None,
+               constrained=False):
     """Solve H dx = -g on the free DOFs (to ``rtol`` if the solver is iterative).
 
     Counts the solve, its iterations and its setups in ``result``. With a
     :class:`ReusedAMG` solver (``psd`` given) returns dx, the slope g . dx and
     whether CG met negative curvature (``psd=False``: the exact tangent is
     indefinite, dx is then CG's iterate so far); else dx and the slope.
-    ``x0`` is a warm start for CG.
+    ``x0`` is a warm start for CG. ``constrained``: H is already constrained (in place).
     """
     t0 = time.perf_counter()
-    A = constrain(H, free, pattern)
+    A = H if constrained else constrain(H, free, pattern)
     kw = {"rtol": rtol} if rtol is not None and _takes_rtol(solver) else {}
     if isinstance(solver, ReusedAMG):
         kw.update(psd=True if psd is None else psd, x0=x0)
@@ -437,7 +442,7 @@ def _direction(solver, H, g, free, pattern, near_null, result, rtol=None, psd=No
 
 
 def _direction_trial(solver, linearize, x, H, g, free, pattern, near_null, result, eta, exact,
-                     project):
+                     project, constrained=False):
     """The direction with a solver that cannot stop CG at negative curvature (a direct one,
     a user's, or any with ``_REUSE_AMG`` off): on an exact tangent it is solved first, and
     when its direction is no descent direction the projected tangent is assembled and solved
@@ -445,7 +450,7 @@ def _direction_trial(solver, linearize, x, H, g, free, pattern, near_null, resul
     # on an exact tangent, a stalled CG is answered by projecting, not by a big LU
     strict = solver.strict() if exact and project and hasattr(solver, "strict") else solver
     try:
-        dx, slope = _direction(strict, H, g, free, pattern, near_null, result, eta)
+        dx, slope = _direction(strict, H, g, free, pattern, near_null, result, eta, constrained=constrained)
     except LinearSolverFailed:
         if not (exact and project):
             raise
