@@ -1,11 +1,13 @@
-"""The finite element space of a body: scikit-fem bases, DOF maps, quadrature data.
+"""The finite element space of a body: scikit-fem DOF maps, mapping, quadrature data.
 
 A :class:`Discretization` is built once per model and holds everything the
 energy kernels need that does not depend on the deformation:
 
-- the vector Lagrange basis (P1 or P2 tets) on which the elastic energy is
-  integrated, and a second one with a richer quadrature for the mass matrix;
-- the reference-gradient of every scalar shape function at every quadrature
+- scikit-fem's DOF map (``dofs``), element mapping and quadrature for the
+  Lagrange tets (P1 or P2) on which the elastic energy is integrated; its
+  bases (``scalar_basis``, the vector ``basis``, the mass matrix's on a richer
+  quadrature) are built on first use, for form assembly;
+- the physical gradient of every scalar shape function at every quadrature
   point, ``dN`` with shape ``(nloc, 3, nelems, nqp)`` (1/m), and the quadrature
   weights times the Jacobian, ``dx`` with shape ``(nelems, nqp)`` (m^3);
 - the element DOF table ``element_dofs`` (``(3 * nloc, nelems)``, scikit-fem's
