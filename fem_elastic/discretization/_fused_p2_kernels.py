@@ -194,7 +194,8 @@ def hessian_p2(x, X, nodes, Dm_inv, dx, G, kind, prm, project, indptr, off, data
     T = np.empty((3, 3, NLOC, 3))  # T[i, j, b, k] = w sum_l C[3 i + j, 3 k + l] dN_b,l
     K = np.empty((3 * NLOC, 3 * NLOC))
     for e in range(nodes.shape[0]):
-        _gather(x, X, nodes, e, u)
+        if kind != _k.LINEAR:  # the linear tangent does not depend on x
+            _gather(x, X, nodes, e, u)
         K[:, :] = 0.0
         D = Dm_inv[e]
         for q in range(G.shape[0]):
@@ -203,7 +204,7 @@ def hessian_p2(x, X, nodes, Dm_inv, dx, G, kind, prm, project, indptr, off, data
                 _add_linear_block(K, dN, dx[e, q] * prm[1], dx[e, q] * prm[0])
                 continue
             tangent(kind, _point_F(u, dN), prm, C)
-            if project and kind != _k.LINEAR:
+            if project:  # (never for LINEAR, whose tangent is PSD: it took the branch above)
                 project_psd(C, L, Q, w9)
             w = dx[e, q]
             for i in range(3):
@@ -247,9 +248,7 @@ class _P2Geometry:
         # Jacobian (MappingAffine.invA, (3, 3, ne)), not a second inversion of the edge matrices
         self.Dm_inv = _frozen(np.asarray(space.mapping.invA).transpose(2, 0, 1), float)
         self.dx = _frozen(space.dx, float)  # (ne, nq)
-        points = space.quadrature[0]  # (3, nq) reference points
-        G = np.stack([space.element.lbasis(points, a)[1] for a in range(NLOC)])  # (10, 3, nq)
-        self.G = _frozen(G.transpose(2, 0, 1), float)  # (nq, 10, 3)
+        self.G = _frozen(space.ref_gradients.transpose(2, 0, 1), float)  # (nq, 10, 3)
         self.X = _frozen(space.X, float)
         self.ndofs = space.ndofs
 

@@ -257,8 +257,12 @@ class Discretization:
         self.quadrature = get_quadrature(mesh.refdom, self.intorder)
         points, weights = self.quadrature
         invDF = self.mapping.invDF(points)  # (3, 3, ne, nq), d xi / d x
-        dphi = np.stack([self.element.lbasis(points, a)[1] for a in range(self.element.doflocs.shape[0])])
-        self.dN = np.ascontiguousarray(np.einsum("ijeq,aiq->ajeq", invDF, dphi))  # (nloc, 3, ne, nq)
+        # d N_a / d xi at the quadrature points, (nloc, 3, nq): the reference gradients, which the
+        # fused P2 kernels map per point themselves
+        self.ref_gradients = np.stack([self.element.lbasis(points, a)[1]
+                                       for a in range(self.element.doflocs.shape[0])])
+        # (nloc, 3, ne, nq)
+        self.dN = np.ascontiguousarray(np.einsum("ijeq,aiq->ajeq", invDF, self.ref_gradients))
         self.dx = np.abs(self.mapping.detDF(points)) * weights  # (ne, nq)
         nodes = np.asarray(self.dofs.element_dofs)
         # (nloc, ne) nodes -> (nloc, 3, ne) DOFs -> (3 nloc, ne), local DOF 3 a + i
@@ -275,7 +279,7 @@ class Discretization:
         # doflocs maps reference nodes through each element and can be a few
         # ulps off; at the vertices take the mesh's own coordinates.
         self.X[self.vertex_dofs] = mesh.p.T
-        for arr in (self.X, self.element_dofs, self.vertex_dofs, self.dN, self.dx):
+        for arr in (self.X, self.element_dofs, self.vertex_dofs, self.dN, self.dx, self.ref_gradients):
             arr.setflags(write=False)
 
     @staticmethod

@@ -790,7 +790,8 @@ def beam_mesh(
     # the copy shares t, of which the facets are a function: hand it scikit-fem's lazily built
     # facets rather than have them built again on first use (0.5 ms of a 27x1x1 P2 model); where
     # a scikit-fem release names them otherwise nothing is copied, and they are built as before
-    for cached in ("_facets", "_t2f"):
-        if cached in vars(mesh) and np.array_equal(named.t, mesh.t):
-            setattr(named, cached, vars(mesh)[cached])
+    if np.array_equal(named.t, mesh.t):
+        for cached in ("_facets", "_t2f"):
+            if cached in vars(mesh):
+                setattr(named, cached, vars(mesh)[cached])
     return named

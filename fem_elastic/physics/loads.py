@@ -9,7 +9,6 @@ constant load density times the integral of each scalar shape function.
 from __future__ import annotations
 
 import numpy as np
-from skfem import FacetBasis, LinearForm, MeshTet1
 
 from ..discretization.space import Discretization
 from ..errors import InvalidParameter
@@ -32,11 +31,6 @@ def as_vector3(value, name: str, unit: str, example: str = "(0.0, 0.0, -9.81)") 
             f"{name} must be three finite numbers ({unit}), e.g. {example}; got {value!r}."
         )
     return v
-
-
-@LinearForm
-def _shape_integral(v, w):
-    return v  # int N_a over the domain or the facets
 
 
 def gravity_load(space: Discretization, density: float, g) -> LinearPotential:
@@ -83,21 +77,17 @@ def traction_load(space: Discretization, boundary: str, t) -> LinearPotential:
 def facet_shape_integrals(space: Discretization, facets: np.ndarray) -> np.ndarray:
     """``int_Gamma N_a dA`` (m^2) over the given facets, for every scalar node a of the space.
 
-    The facets of a straight-sided tet mesh are flat triangles, where the
-    integrals have a closed form: A/3 at each corner for P1; for P2, A/3 at
-    each edge midpoint and 0 at the corners (the quadratic Lagrange
-    triangle's corner functions integrate to zero), on the nodes as
-    ``space.dofs`` numbers them (checked against scikit-fem's
-    quadrature in the tests). Other meshes (curved geometry) go through
-    scikit-fem's ``FacetBasis``. The closed form is exact and skips building a facet basis:
-    2-4 ms of the 20 ms a small P2 static solve takes
+    The facets of the space's straight-sided tets (it refuses curved ones) are
+    flat triangles, where the integrals have a closed form: A/3 at each corner
+    for P1; for P2, A/3 at each edge midpoint and 0 at the corners (the
+    quadratic Lagrange triangle's corner functions integrate to zero), on the
+    nodes as ``space.dofs`` numbers them (checked against scikit-fem's
+    ``FacetBasis`` quadrature in the tests). The closed form is exact and skips
+    building a facet basis: 2-4 ms of the 20 ms a small P2 static solve took
     (``scripts/bench_time_to_accuracy.py``).
     """
     mesh = space.mesh
     facets = np.asarray(facets, dtype=np.int64)
-    if type(mesh) is not MeshTet1:  # exactly: MeshTet2 (curved) derives from it
-        fb = FacetBasis(mesh, space.element, facets=facets, intorder=2 * space.order)
-        return _shape_integral.assemble(fb)
     tri = mesh.facets[:, facets]  # (3, nf) vertex indices
     p = mesh.p
     area = 0.5 * np.linalg.norm(np.cross(p[:, tri[1]] - p[:, tri[0]], p[:, tri[2]] - p[:, tri[0]],
