@@ -1,31 +1,41 @@
 """Cost of IPC contact: an implicit step with IPC over the same step without contact, and the
 broad phase's time against the number of surface primitives (fitted exponent).
 
-The scene: a soft cube resting on a stiff cube (one mesh, two pieces, the lower cube's bottom
-fixed), gravity, the upper cube starting half of dhat above the lower one so that the barrier is
-active from the first step. The same implicit Euler step is timed from the same state on the
-model with ``contact=fe.IPCContact(...)`` and on the model without it, twice: the first step
-(the impact: the gap closes from dhat / 2 to the barrier's equilibrium, ~1e-7 m with the
-adaptive kappa, through CCD-bounded Newton steps) and a step in resting contact after a few
-steps. Each row gives Newton iterations and the time in linearization, linear solves and line
-search (CCD included), so the remaining cost can be read off. Times are medians of
-``--repeats`` runs of the step, the with/without-contact pairs interleaved in one process (the
-machine's load then weighs on both alike).
+The scene (default): the two-body drop of ``scenes/two_bodies.toml`` (a soft block, the
+"ball", thrown down onto a stiff block that rests on the barrier ground), refined to ``--cells``
+n: the ball n x n x n cells, the block 2n x 2n x n (30 n^3 tets; 9 gives 21,870). Every step of
+the drop with IPC is timed, and from the same state the same implicit Euler step of the same
+scene without its ``[contact]`` table (no IPC; the ground, a fixed obstacle with its own barrier,
+stays in both). The two alternate in one process, one pair per step, so the machine's load
+weighs on both alike. The table gives each step's Newton iterations and times; the summary
+splits the steps into those where no IPC pair is within dhat (the contact's fixed cost: broad
+phase, CCD, an empty barrier) and those with IPC pairs, and gives the median, the worst step and
+the whole drop. Both solves use ``max_iter=200``: the impact of a 21,870-tet drop takes 90
+Newton iterations, more than ImplicitEuler's default 30.
 
-    .venv/bin/python scripts/bench_ipc.py            # ~20k tets
-    .venv/bin/python scripts/bench_ipc.py --quick    # 96 tets (the test suite's smoke test)
-    .venv/bin/python scripts/bench_ipc.py --projection clamp   # IPC's clamped pair Hessians
-    .venv/bin/python scripts/bench_ipc.py --solver amg         # AMG-CG for both steps
+``--cubes``: two aligned cubes, the upper one starting half of dhat above the lower one, timed
+on their first step (the barrier closes the gap by three decades) and on a step in resting
+contact, each ``--repeats`` times (medians). Their grids match face to face, so every edge-edge
+pair is parallel: the hardest case for the barrier's Newton.
+
+    .venv/bin/python scripts/bench_ipc.py                     # the drop, 21,870 tets, 0.6 s
+    .venv/bin/python scripts/bench_ipc.py --quick             # 240 tets, 0.2 s (the suite's smoke test)
+    .venv/bin/python scripts/bench_ipc.py --cubes --repeats 3 # the aligned cubes, 20,736 tets
+    .venv/bin/python scripts/bench_ipc.py --cubes --trace     # their Newton iterations, logged
+    .venv/bin/python scripts/bench_ipc.py --cubes --projection abs   # IPC's other pair projection
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import numpy as np
 
 import fem_elastic as fe
+
+SCENE = Path(__file__).resolve().parent.parent / "scenes" / "two_bodies.toml"
 
 
 def two_cubes(n, size=0.2, gap=5e-4):
@@ -46,10 +56,84 @@ def model_of(mesh, n_lower, contact):
 
 def time_step(model, state, dt, solver=None):
     """Wall time (s) of one implicit Euler step from ``state``, its stats and its end state."""
-    ie = fe.ImplicitEuler(max_iter=200, linear_solver=solver)
+    ie = fe.ImplicitEuler(max_iter=MAX_ITER, linear_solver=solver)
     t0 = time.perf_counter()
     out = ie.step(model, state, dt)
     return time.perf_counter() - t0, ie.last_stats, out
+
+
+#: Newton iterations allowed per step (both models): an impact takes more than the default 30
+MAX_ITER = 200
+
+
+def drop_runs(n):
+    """The drop of ``scenes/two_bodies.toml`` at ``n`` cells per ball edge, with and without IPC.
+
+    Returns the two :class:`~fem_elastic.app.scene.BuiltRun` s: the scene as written but for its
+    meshes (ball n^3 cells, block 2n x 2n x n: the scene's own element size at n = 2), and the
+    same without its ``[contact]`` table.
+    """
+    from fem_elastic.app.scene import load_scene
+
+    runs = []
+    for ipc in (True, False):
+        scene = load_scene(SCENE)
+        ball, block = scene.spec["bodies"]
+        ball["mesh"]["cells"], block["mesh"]["cells"] = [n, n, n], [2 * n, 2 * n, n]
+        if not ipc:
+            scene.spec["contact"] = None
+        runs.append(scene.build()[0])
+    return runs
+
+
+def drop(n, steps, solver=None):
+    """Time every step of the drop with IPC against the same step without; print the table and
+    the summary; return the rows ``(step, t_ipc, its_ipc, t_free, its_free, pairs_start,
+    pairs_end, min_distance_end)``."""
+    with_ipc, without = drop_runs(n)
+    m, mf, dt, state = with_ipc.model, without.model, with_ipc.dt, with_ipc.state
+    steps = steps or with_ipc.steps
+    print(f"two-body drop ({SCENE.name}): {m.mesh.t.shape[1]} tets, {m.ndofs} DOFs, "
+          f"{m.collision_surface().n_vertices} surface vertices, dt = {dt} s, {steps} steps; "
+          f"ImplicitEuler(max_iter={MAX_ITER}), solver {'auto' if solver is None else solver!r}")
+    time_step(mf, state, dt, solver)  # warm-up (numba, patterns): the free model; the IPC
+    rows = []                         # model's first step is the table's first row
+    pairs = m.contact.diagnostics(state.x)["active_contacts"]
+    print(" step    t (s)  pairs  min dist (m) | IPC ms  its | no IPC ms  its |  ratio  per it")
+    for k in range(steps):
+        tf, sf, _ = time_step(mf, state, dt, solver)
+        ti, si, new = time_step(m, state, dt, solver)
+        d = m.contact.diagnostics(new.x)
+        row = (k, ti, si.newton_iterations, tf, sf.newton_iterations, pairs, d["active_contacts"],
+               d["min_distance"])
+        rows.append(row)
+        per_it = (ti / max(si.newton_iterations, 1)) / (tf / max(sf.newton_iterations, 1))
+        print(f"{k:5d} {new.t:8.3f} {d['active_contacts']:6d} {d['min_distance']:13.3e} | "
+              f"{ti * 1e3:7.0f} {si.newton_iterations:4d} | {tf * 1e3:9.0f} {sf.newton_iterations:4d} | "
+              f"{ti / tf:6.2f}x {per_it:5.2f}x", flush=True)
+        state, pairs = new, d["active_contacts"]
+    summarize_drop(rows)
+    return rows
+
+
+def summarize_drop(rows):
+    """Print the ratios of the drop's steps by kind, the worst step and the whole drop."""
+    r = np.array([row[1] / row[3] for row in rows])
+    per_it = np.array([(row[1] / max(row[2], 1)) / (row[3] / max(row[4], 1)) for row in rows])
+    touching = np.array([row[5] > 0 or row[6] > 0 for row in rows])
+    for label, sel in (("steps with no IPC pair within dhat", ~touching),
+                       ("steps with IPC pairs", touching)):
+        if sel.any():
+            q1, med, q3 = np.percentile(r[sel], [25, 50, 75])
+            print(f"{label} ({int(sel.sum())}): ratio median {med:.2f}x (quartiles {q1:.2f}-{q3:.2f}x, "
+                  f"range {r[sel].min():.2f}-{r[sel].max():.2f}x); per Newton iteration median "
+                  f"{np.median(per_it[sel]):.2f}x")
+    w = int(np.argmax(r))
+    print(f"worst step: {rows[w][0]}, {r[w]:.2f}x: {rows[w][2]} Newton iterations "
+          f"against {rows[w][4]}")
+    t_ipc, t_free = sum(row[1] for row in rows), sum(row[3] for row in rows)
+    print(f"whole drop: {t_ipc:.1f} s with IPC, {t_free:.1f} s without: ratio (IPC / no contact) "
+          f"{t_ipc / t_free:.2f}x; all steps' ratio median {np.median(r):.2f}x  (goal <= 1.5x)")
 
 
 def _breakdown(stats):
@@ -143,24 +227,9 @@ def broad_phase_scaling(sizes, repeats):
     return rows
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="small meshes (seconds)")
-    ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--cells", type=int, default=None,
-                    help="cells along a cube's edge (2 * 6 n^3 tets; default 12, --quick 2)")
-    ap.add_argument("--projection", choices=("clamp", "abs"), default="clamp",
-                    help="PSD projection of the pair Hessians (fe.IPCContact(projection=...))")
-    ap.add_argument("--solver", choices=("auto", "direct", "amg"), default="auto",
-                    help="linear solver of both steps (default fe.AutoSolver: direct below 20k DOFs)")
-    ap.add_argument("--no-broad-phase", action="store_true", help="skip the broad-phase scaling")
-    ap.add_argument("--trace", action="store_true",
-                    help="only the first-contact step and the resting step, once each, logging "
-                         "each Newton iteration (||g||, step fraction, exact or projected) and "
-                         "each CCD bound")
-    args = ap.parse_args(argv)
+def cubes(args, solver):
+    """The aligned cubes: their first-contact and resting steps, or their trace."""
     n = args.cells or (2 if args.quick else 12)  # 2 * 6 n^3 tets: 96, or 20,736
-    solver = {"auto": None, "direct": fe.DirectSolver(), "amg": fe.AMGSolver()}[args.solver]
     dt = 0.01
     mesh, n_lower = two_cubes(n)
     with_ipc = model_of(mesh, n_lower, fe.IPCContact(dhat=1e-3, projection=args.projection))
@@ -174,28 +243,57 @@ def main(argv=None):
         # distance goes 4.64, 5.08, 5.12, 5.12e-8 m: errors 9 %, 0.9 %, 0.02 %, and ||g|| 0.32,
         # 0.078, 7.3e-4, 6.5e-8 N), so three full steps reach the tolerance (1e-8 * 12.9 N there)
         out = trace_step("first contact", with_ipc, state, dt, solver)
-        ie = fe.ImplicitEuler(max_iter=200, linear_solver=solver)
+        ie = fe.ImplicitEuler(max_iter=MAX_ITER, linear_solver=solver)
         for _ in range(settle - 1):  # to the state the timed resting step starts from
             out = ie.step(with_ipc, out, dt)
         trace_step("resting contact", with_ipc, out, dt, solver)
         return
-    print(f"mesh: {mesh.t.shape[1]} tets, {with_ipc.ndofs} DOFs, "
+    print(f"aligned cubes: {mesh.t.shape[1]} tets, {with_ipc.ndofs} DOFs, "
           f"{with_ipc.collision_surface().n_vertices} surface vertices, {d['active_contacts']} "
           f"active contact pairs at the start; projection {args.projection!r}, solver {args.solver!r}")
     # the first step: the upper cube falls from dhat / 2 into the barrier (the impact, the
     # costliest step: CCD-bounded Newton steps while the gap closes by three decades)
-    ratio = compare("first contact", with_ipc, without, state, dt, args.repeats, solver)
-    print(f"ratio (IPC / no contact): {ratio:.2f}x  (goal <= 1.5x)")
+    compare("first contact", with_ipc, without, state, dt, args.repeats, solver)
     # a step in resting contact: after `settle` steps of IPC (the same step timed without contact
     # from the same state, where the elastic problem is the same)
-    ie = fe.ImplicitEuler(max_iter=200, linear_solver=solver)
+    ie = fe.ImplicitEuler(max_iter=MAX_ITER, linear_solver=solver)
     for _ in range(settle):
         state = ie.step(with_ipc, state, dt)
     d = with_ipc.contact.diagnostics(state.x)
     print(f"after {settle} steps: minimum distance {d['min_distance']:.3g} m, "
           f"{d['active_contacts']} active pairs, kappa {d['kappa']:.4g} N/m^3")
     compare("resting contact", with_ipc, without, state, dt, args.repeats, solver)
-    if args.no_broad_phase:
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="small meshes, few steps (seconds)")
+    ap.add_argument("--cubes", action="store_true",
+                    help="the two aligned cubes' first-contact and resting steps instead of the drop")
+    ap.add_argument("--repeats", type=int, default=5, help="--cubes: pairs of runs per step")
+    ap.add_argument("--cells", type=int, default=None,
+                    help="the drop: cells along the ball's edge (30 n^3 tets; default 9, --quick 2); "
+                         "--cubes: along a cube's edge (2 * 6 n^3 tets; default 12, --quick 2)")
+    ap.add_argument("--steps", type=int, default=None,
+                    help="the drop's steps (default: the scene's 0.6 s, 60 steps; --quick 20)")
+    ap.add_argument("--projection", choices=("clamp", "abs"), default="clamp",
+                    help="--cubes: PSD projection of the pair Hessians (fe.IPCContact(projection=...))")
+    ap.add_argument("--solver", choices=("auto", "direct", "amg"), default="auto",
+                    help="linear solver of both steps (default fe.AutoSolver: direct below 20k DOFs)")
+    ap.add_argument("--no-broad-phase", action="store_true", help="skip the broad-phase scaling")
+    ap.add_argument("--trace", action="store_true",
+                    help="--cubes: only the first-contact step and the resting step, once each, "
+                         "logging each Newton iteration (||g||, step fraction, exact or projected) "
+                         "and each CCD bound")
+    args = ap.parse_args(argv)
+    solver = {"auto": None, "direct": fe.DirectSolver(), "amg": fe.AMGSolver()}[args.solver]
+    if args.trace and not args.cubes:
+        ap.error("--trace traces the cubes' steps: add --cubes")
+    if args.cubes:
+        cubes(args, solver)
+    else:
+        drop(args.cells or (2 if args.quick else 9), args.steps or (20 if args.quick else None), solver)
+    if args.no_broad_phase or args.trace:
         return
     sizes = (2, 3, 4) if args.quick else (4, 6, 8, 12, 16, 24)
     rows = broad_phase_scaling(sizes, args.repeats)

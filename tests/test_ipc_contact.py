@@ -311,18 +311,55 @@ def test_block_on_incline_sticks_below_the_friction_angle():
 
 
 def test_bench_ipc_quick_prints_its_figures():
+    """The drop of scenes/two_bodies.toml: a row per step, the summary by kind of step, and the
+    broad phase's fitted exponent."""
     script = Path(__file__).resolve().parent.parent / "scripts" / "bench_ipc.py"
     r = subprocess.run([sys.executable, str(script), "--quick", "--repeats", "1"],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
-    assert "ratio (IPC / no contact)" in r.stdout and "fitted exponent" in r.stdout
+    out = r.stdout
+    rows = [line for line in out.splitlines() if line[:5].strip().isdigit() and "|" in line]
+    assert len(rows) == 20  # --quick: 20 steps, one row each
+    # the ball meets the block within those 20 steps (at t ~ 0.14 s): both kinds of step occur
+    assert "steps with no IPC pair within dhat" in out and "steps with IPC pairs" in out
+    assert "whole drop:" in out and "ratio (IPC / no contact)" in out and "fitted exponent" in out
+
+
+def test_bench_ipc_cubes_prints_both_steps():
+    script = Path(__file__).resolve().parent.parent / "scripts" / "bench_ipc.py"
+    r = subprocess.run([sys.executable, str(script), "--quick", "--cubes", "--repeats", "1",
+                        "--no-broad-phase"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "first contact: ratio (IPC / no contact)" in r.stdout
+    assert "resting contact: ratio (IPC / no contact)" in r.stdout
+
+
+@pytest.mark.filterwarnings("ignore:IPC contact")
+def test_an_ipc_impact_that_runs_out_of_newton_iterations_says_to_raise_max_iter():
+    """Halving dt does not shorten an IPC impact: the error names max_iter, not only dt."""
+    from fem_elastic.app.scene import load_scene
+
+    scene = load_scene(Path(__file__).resolve().parent.parent / "scenes" / "two_bodies.toml")
+    run = scene.build()[0]
+    state = run.state
+    for _ in range(13):  # to the step where the ball meets the block (t = 0.13 s)
+        state = run.integrator.step(run.model, state, run.dt)
+    assert run.model.contact.diagnostics(state.x)["active_contacts"] == 0
+    with pytest.raises(fe.Diverged, match=r"max_iter \(e\.g\. fe\.ImplicitEuler\(max_iter=200\)"):
+        fe.ImplicitEuler(max_iter=3, max_dt_cuts=1).step(run.model, state, run.dt)
+    # the same step with the scene's own budget takes more than 3 iterations and lands apart
+    ie = fe.ImplicitEuler(max_iter=200)
+    out = ie.step(run.model, state, run.dt)
+    assert ie.last_stats.newton_iterations > 3
+    assert run.model.contact.diagnostics(out.x)["active_contacts"] > 0
+    assert not run.model.contact.has_intersections(out.x)
 
 
 def test_bench_ipc_trace_logs_both_steps():
     """--trace: each Newton iteration and CCD bound of the first-contact and the resting step."""
     script = Path(__file__).resolve().parent.parent / "scripts" / "bench_ipc.py"
     # one stream, unbuffered: the Newton log (stderr) in order with the prints (stdout)
-    r = subprocess.run([sys.executable, str(script), "--quick", "--trace"],
+    r = subprocess.run([sys.executable, str(script), "--quick", "--cubes", "--trace"],
                        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=300,
                        env={**os.environ, "PYTHONUNBUFFERED": "1"})
     assert r.returncode == 0, r.stdout
