@@ -32,14 +32,14 @@ def _linearize(z, project):
     return g, sp.csr_matrix(np.diag([1.0, hyy]))
 
 
-def _solve(max_step, evaluated, max_iter=200):
-    def energy(z):
+def _solve(max_step, evaluated, max_iter=200, linearize=_linearize, start=(0.3, 1e-3), energy=_energy):
+    def counted(z):
         evaluated.append(z.copy())
-        return _energy(z)
+        return energy(z)
 
-    return newton_minimize(energy, _linearize, np.array([0.3, 1e-3]), np.ones(2, dtype=bool),
+    return newton_minimize(counted, linearize, np.array(start), np.ones(2, dtype=bool),
                            rtol=1e-10, g_scale=1.0, max_iter=max_iter, max_step=max_step,
-                           linear_solver="direct")
+                           linear_solver="direct", saddle_extension=max_step is not None)
 
 
 def test_full_projected_steps_at_a_saddle_are_extended_and_reach_the_same_minimum():
@@ -53,6 +53,64 @@ def test_full_projected_steps_at_a_saddle_are_extended_and_reach_the_same_minimu
     # the doubling (up to 64x per step) a handful
     assert plain.extensions == 0 and free.extensions >= 1
     assert free.iterations <= plain.iterations // 3, (free.iterations, plain.iterations)
+
+
+def test_after_an_extended_step_newton_tries_the_exact_tangent_again():
+    calls = []  # the project flag of every linearization, in order
+
+    def recording(z, project):
+        calls.append(project)
+        return _linearize(z, project)
+
+    res = _solve(lambda z, dz: 1.0, [], linearize=recording)
+    assert res.converged and res.extensions >= 1
+    # each extended iteration was: exact tried (False), found indefinite, projected (True); the
+    # next linearization is the exact one again (False), not a projected one
+    tried_then_projected = [i for i in range(len(calls) - 2) if calls[i] is False and calls[i + 1] is True]
+    assert tried_then_projected and all(calls[i + 2] is False for i in tried_then_projected)
+
+
+def test_a_convex_problem_is_never_extended():
+    """Extensions are for saddles only: on a convex quartic the exact tangent is never
+    indefinite, so no step is lengthened, even with the CCD passing every step."""
+
+    def convex(z):
+        return 0.5 * z[0] ** 2 + z[1] ** 4 + 0.5 * z[1] ** 2
+
+    def lin(z, project):
+        return (np.array([z[0], 4 * z[1] ** 3 + z[1]]),
+                sp.csr_matrix(np.diag([1.0, 12 * z[1] ** 2 + 1.0])))
+
+    res = _solve(lambda z, dz: 1.0, [], linearize=lin, start=(2.0, 3.0), energy=convex)
+    assert res.converged and res.extensions == 0
+    np.testing.assert_allclose(res.x, 0.0, atol=1e-9)
+
+
+def test_extension_is_kept_to_models_whose_ccd_bounds_every_contact():
+    """IPC with the ground (a half-space) or no obstacle: yes; a sphere or a box, checked only at
+    a step's end, or no IPC: no."""
+    import pytest
+
+    pytest.importorskip("ipctk")
+    import warnings
+
+    import fem_elastic as fe
+    from fem_elastic.solvers.newton import saddle_extension_safe
+
+    mesh = fe.beam_mesh(length=0.1, width=0.1, height=0.1, cells=(1, 1, 1))
+    body = fe.ElasticBody(fe.NeoHookean(E=1e5, nu=0.3))
+
+    def model(ground, contact):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return fe.Model(mesh, 1000.0, body, ground=ground, contact=contact)
+
+    ipc = fe.IPCContact(dhat=1e-3)
+    assert saddle_extension_safe(model(None, ipc))
+    assert saddle_extension_safe(model(fe.Ground(z=-0.01, method="barrier"), ipc))
+    assert not saddle_extension_safe(model(fe.Sphere(center=(0.05, 0.05, -0.2), radius=0.1,
+                                                     method="barrier"), ipc))
+    assert not saddle_extension_safe(model(fe.Ground(z=-0.01, method="barrier"), None))
 
 
 def test_an_extension_never_steps_past_the_ccd_bound():

@@ -24,7 +24,7 @@ falls to the round-off of Pi itself, where energy comparisons carry no
 information; the full Newton step is then taken (it is tiny, and Newton is
 in its quadratic regime there).
 
-Under a contact barrier (``max_step`` given) a full projected step taken
+Under IPC contact (``max_step`` and ``saddle_extension`` given) a full projected step taken
 where the exact tangent proved indefinite is doubled, up to 64 times, while
 the energy keeps falling and the CCD allows it: Newton stands near a saddle
 there, and the projection leaves the descent direction only the inertia's
@@ -79,7 +79,7 @@ import scipy.sparse as sp
 from .linear_solvers import (AMGSolver, AutoSolver, LinearSolverFailed, ReusedAMG,
                              SingularMatrix, as_linear_solver)
 
-__all__ = ["NewtonResult", "newton_minimize"]
+__all__ = ["NewtonResult", "newton_minimize", "saddle_extension_safe"]
 
 
 def _takes_rtol(solver) -> bool:
@@ -140,8 +140,9 @@ class NewtonResult:
     linear_setups : int
         Preconditioner hierarchies (AMG) and LU factorizations built.
     extensions : int
-        Full projected steps lengthened at a saddle of a contact barrier (see
-        ``_extend``: where the exact tangent is indefinite and CCD bounds the step).
+        Full projected steps lengthened at a saddle under IPC contact (see
+        ``_extend``: where the exact tangent proved indefinite and the CCD
+        passed the longer step).
     """
 
     x: np.ndarray
@@ -203,6 +204,7 @@ def newton_minimize(
     min_iter: int = 0,
     max_step: Callable[[np.ndarray, np.ndarray], float] | None = None,
     hessian_constant: bool = False,
+    saddle_extension: bool = False,
 ) -> NewtonResult:
     """Minimise ``energy`` from ``x0`` over the free DOFs.
 
@@ -286,6 +288,13 @@ def newton_minimize(
         only for its round-off test; this makes that iteration a gradient and
         a back-substitution.
 
+    saddle_extension : bool
+        With ``max_step``: a full projected step taken where the exact
+        tangent proved indefinite (a saddle) is doubled while the energy keeps
+        falling and ``max_step`` passes the longer step (``_extend``). Only
+        where ``max_step`` bounds every contact of the problem (see
+        :func:`saddle_extension_safe`): a longer step is otherwise checked at
+        its end alone, and could pass through an obstacle.
     Returns
     -------
     NewtonResult
@@ -402,7 +411,7 @@ def newton_minimize(
             )
             result.iterations = it
             break
-        if max_step is not None and alpha == 1.0 and tried_exact and not exact:
+        if saddle_extension and max_step is not None and alpha == 1.0 and tried_exact and not exact:
             # a full projected step where the exact tangent was indefinite: near a saddle of a
             # barrier, the projection leaves its descent direction only the inertia's stiffness
             x_try, e_try, alpha = _extend(energy, max_step, x, dx, x_try, e_try)
@@ -420,6 +429,22 @@ def newton_minimize(
 
 #: Most doublings of a projected step at a saddle (:func:`_extend`): up to 64 times its length
 MAX_EXTENSIONS = 6
+
+
+def saddle_extension_safe(model) -> bool:
+    """Whether ``model.max_step`` bounds every contact a longer Newton step could cross.
+
+    True with IPC contact (its CCD checks the whole segment of a step) when
+    the fixed obstacles, if any, are half-spaces (``fe.Ground``): a step
+    cannot pass through a plane without ending beyond it, where its barrier is
+    infinite and its penalty large. A sphere or a box is checked only at a
+    step's end, so a step doubled at a saddle could jump through it.
+    """
+    from ..physics.obstacles import Ground
+
+    contact = getattr(model, "contact", None)
+    return (getattr(contact, "kind", None) == "potential"
+            and all(isinstance(o, Ground) for o in getattr(model, "obstacles", ())))
 
 
 def _extend(energy, max_step, x, dx, x_full, e_full):

@@ -46,7 +46,7 @@ import numpy as np
 from ..errors import InvalidParameter, NotConverged
 from ..physics.impulse_contact import reject_impulse_contact
 from .linear_solvers import LinearSolverFailed, SingularMatrix, as_linear_solver
-from .newton import constrain, newton_minimize
+from .newton import constrain, newton_minimize, saddle_extension_safe
 from .petsc_solver import PETScSolver  # cheap: petsc4py is imported on its first solve
 from .stability import UnstableEquilibrium, lowest_eigenpair
 from .static_view import StaticResultView
@@ -617,7 +617,7 @@ def solve_static(
             g_floor=g_floor,
             gradient=lambda y: model.gradient(y, target),
             min_iter=0 if pred else 1,
-            max_step=max_step,
+            max_step=max_step, saddle_extension=saddle_extension_safe(model),
             hessian_constant=bool(getattr(model, "quadratic", False)),
         )
         total.iterations += res.iterations + pred
@@ -751,7 +751,7 @@ def _check_final(model, problem, total, x, free, near_null, stabilize, solver, p
             lambda y, proj: model.linearize(y, 1.0, project=proj),
             best[0], free, linear_solver=solver, near_null=near_null, pattern=pattern,
             gradient=lambda y: model.gradient(y, 1.0), min_iter=1,
-            max_step=_contact_max_step(model), **kw,
+            max_step=_contact_max_step(model), saddle_extension=saddle_extension_safe(model), **kw,
         )
         total.iterations += res.iterations
         total.residual_history.extend(res.residual_history)

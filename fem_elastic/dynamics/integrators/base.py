@@ -124,6 +124,9 @@ class StepStats:
         AMG hierarchies and LU factorizations built for them (with the
         default solver above 20k DOFs, one hierarchy per step unless CG
         needed a rebuild).
+    extensions : int
+        Newton steps lengthened at a saddle under IPC contact
+        (:func:`fem_elastic.solvers.newton.saddle_extension_safe`).
     dt_cuts : int
         Times the step was retried smaller: halved because Newton did not
         converge (implicit schemes), or with more sub-steps (explicit
@@ -148,11 +151,12 @@ class StepStats:
     seconds: dict = field(default_factory=lambda: {"linearize": 0.0, "solve": 0.0, "line_search": 0.0})
     linear_solves: int = 0
     linear_setups: int = 0
+    extensions: int = 0
 
     def add(self, other: "StepStats") -> None:
         """Accumulate another step's counts into this one."""
         for name in ("gradient_evaluations", "newton_iterations", "line_search_cuts", "linear_iterations",
-                     "linear_solves", "linear_setups"):
+                     "linear_solves", "linear_setups", "extensions"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         for k, v in other.seconds.items():
             self.seconds[k] = self.seconds.get(k, 0.0) + v

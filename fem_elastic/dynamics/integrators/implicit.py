@@ -30,7 +30,7 @@ from ...errors import Diverged, InvalidParameter
 from ...solvers.linear_solvers import AutoSolver, as_linear_solver
 from ...materials import Corotated
 from ...physics.impulse_contact import reject_impulse_contact
-from ...solvers.newton import NewtonResult, _direction, newton_minimize
+from ...solvers.newton import NewtonResult, _direction, newton_minimize, saddle_extension_safe
 from ...solvers.petsc_solver import PETScSolver
 from ...solvers.static import _contact_max_step
 from ..state import State
@@ -99,7 +99,7 @@ class _Implicit(Integrator):
                 # drop of scripts/bench_ipc.py)
                 hint = (f"An impact under IPC contact takes many CCD-bounded Newton iterations, "
                         f"whatever the step: raise max_iter (e.g. fe.{self.name}(max_iter=200); "
-                        "[integrator] max_iter = 200 in a scene).")
+                        "[integrator] max_iter = 200 in a scene). Else " + hint[0].lower() + hint[1:])
             raise Diverged(
                 f"{self.name} failed at t = {state.t:.6g} s even after halving dt {self.max_dt_cuts} "
                 f"times (to {h / 2 ** self.max_dt_cuts:.3g} s): {why}. {hint}",
@@ -137,6 +137,7 @@ class _Implicit(Integrator):
             near_null=model.rigid_body_modes,
             pattern=model.space.pattern,
             max_step=_contact_max_step(model),
+            saddle_extension=saddle_extension_safe(model),
         )
 
 
@@ -147,6 +148,7 @@ def _count_newton(stats, res) -> None:
     stats.linear_iterations += res.linear_iterations
     stats.linear_solves += res.linear_solves
     stats.linear_setups += res.linear_setups
+    stats.extensions += getattr(res, "extensions", 0)  # (the distributed Newton has none)
     for k, v in res.seconds.items():
         stats.seconds[k] = stats.seconds.get(k, 0.0) + v
 
