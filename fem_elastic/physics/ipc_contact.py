@@ -131,11 +131,13 @@ class IPCContact:
         with only the inertia's ``m / h^2`` (far softer than the barrier near
         contact), so projected steps along them are long; the absolute value
         keeps a stiffness there. Neither wins everywhere: on the first step of
-        ``scripts/bench_ipc.py``'s two-cube drop (``--projection``) "abs" took
-        11, 17, 12 and 59 Newton iterations at 2, 3, 4 and 5 cells per edge
-        against 12, 12, 23 and 18 clamped (one process; another gave 56
-        against 20 at 2 cells: ipctk sums the pair Hessians in parallel, and
-        near the scene's saddle the Newton path follows the round-off), so
+        ``scripts/bench_ipc.py``'s aligned cubes (``--cubes --projection``) "abs" took
+        11, 16, 12 and 37 Newton iterations at 2, 3, 4 and 5 cells per edge
+        against 12, 12, 21 and 18 clamped (with Newton's saddle extension;
+        11, 17, 12 and 59 against 12, 12, 23 and 18 before it, and another
+        process gave 56 against 20 at 2 cells: ipctk sums the pair Hessians
+        in parallel, and near the scene's saddle the Newton path follows the
+        round-off), so
         the default stays IPC's.
 
     Examples
@@ -366,8 +368,9 @@ class BoundIPCContact(Potential):
         after a full step, see :mod:`fem_elastic.solvers.newton`), the exact
         one restores quadratic convergence; the clamped one converges only
         linearly there (a factor of about 0.3 per iteration measured on the
-        two-cube drop of scripts/bench_ipc.py at 2592 tets: 27 Newton
-        iterations in its first step against 13 with the exact tangent).
+        aligned cubes of scripts/bench_ipc.py at 2592 tets: 27 Newton
+        iterations in their first step against 13 with the exact tangent; 12
+        now that Newton also lengthens full projected steps at saddles).
         Newton returns to the projection as soon as the exact direction is
         not a descent direction or is cut by the CCD or the line search. With ``kappa="auto"`` the stiffness is set here at the first
         linearization with active contacts (see the module notes); it does not
