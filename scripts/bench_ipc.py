@@ -7,7 +7,7 @@ n: the ball n x n x n cells, the block 2n x 2n x n (30 n^3 tets; 9 gives 21,870)
 the drop with IPC is timed, and from the same state the same implicit Euler step of the same
 scene without its ``[contact]`` table (no IPC; the ground, a fixed obstacle with its own barrier,
 stays in both). The two alternate in one process, one pair per step, so the machine's load
-weighs on both alike. The table gives each step's Newton iterations and times; the summary
+weighs on both alike; each keeps its own CHOLMOD analysis and factor, as a run of it alone would. The table gives each step's Newton iterations and times; the summary
 splits the steps into those where no IPC pair is within dhat (the contact's fixed cost: broad
 phase, CCD, an empty barrier) and those with IPC pairs, and gives the median, the worst step and
 the whole drop. Both solves use ``max_iter=200``: the impact of a 21,870-tet drop takes 90
@@ -22,6 +22,7 @@ pair is parallel: the hardest case for the barrier's Newton.
     .venv/bin/python scripts/bench_ipc.py --quick             # 240 tets, 0.2 s (the suite's smoke test)
     .venv/bin/python scripts/bench_ipc.py --cubes --repeats 3 # the aligned cubes, 20,736 tets
     .venv/bin/python scripts/bench_ipc.py --cubes --trace     # their Newton iterations, logged
+    .venv/bin/python scripts/bench_ipc.py --no-saddle-extension  # Newton as before the doubling
     .venv/bin/python scripts/bench_ipc.py --cubes --projection abs   # IPC's other pair projection
 """
 
@@ -54,8 +55,34 @@ def model_of(mesh, n_lower, contact):
                     gravity=(0.0, 0.0, -9.81), contact=contact)
 
 
+#: each model's own CHOLMOD of fe.AutoSolver: id(model) -> (model, solver)
+_OWN_FACTORS: dict = {}
+
+
+def _own_factors(model):
+    """Make ``model``'s next solves use its own kept analysis and factor, as in a run of it alone.
+
+    fe.AutoSolver keeps one CHOLMOD analysis and factor per thread (and SuperLU one factor per
+    process). The two models alternate here in one thread, so shared they would mislead: in
+    flight the IPC step would find the factor of the free step's identical first matrix, and in
+    contact the free step would analyse its pattern again after every IPC step. Each model gets
+    its own (the private hooks of a benchmark).
+    """
+    from fem_elastic.solvers import cholmod, linear_solvers
+
+    if cholmod.have_cholmod():
+        own = _OWN_FACTORS.get(id(model))
+        if own is None:
+            solver = fe.CholmodSolver()
+            solver._shared = True  # kept whatever its size, as fe.AutoSolver's own
+            own = _OWN_FACTORS[id(model)] = (model, solver)  # the model kept: its id stays unique
+        cholmod._LOCAL.solver = own[1]
+    linear_solvers._FACTORS.key = linear_solvers._FACTORS.lu = None
+
+
 def time_step(model, state, dt, solver=None):
     """Wall time (s) of one implicit Euler step from ``state``, its stats and its end state."""
+    _own_factors(model)
     ie = fe.ImplicitEuler(max_iter=MAX_ITER, linear_solver=solver)
     t0 = time.perf_counter()
     out = ie.step(model, state, dt)
@@ -284,12 +311,19 @@ def main(argv=None):
     ap.add_argument("--solver", choices=("auto", "direct", "amg"), default="auto",
                     help="linear solver of both steps (default fe.AutoSolver: direct below 20k DOFs)")
     ap.add_argument("--no-broad-phase", action="store_true", help="skip the broad-phase scaling")
+    ap.add_argument("--no-saddle-extension", action="store_true",
+                    help="Newton without its doubling of projected steps at saddles (as before "
+                         "issue 17's last stop; newton.MAX_EXTENSIONS = 0), for comparison")
     ap.add_argument("--trace", action="store_true",
                     help="--cubes: only the first-contact step and the resting step, once each, "
                          "logging each Newton iteration (||g||, step fraction, exact or projected) "
                          "and each CCD bound")
     args = ap.parse_args(argv)
     solver = {"auto": None, "direct": fe.DirectSolver(), "amg": fe.AMGSolver()}[args.solver]
+    if args.no_saddle_extension:
+        from fem_elastic.solvers import newton
+
+        newton.MAX_EXTENSIONS = 0
     if args.trace and not args.cubes:
         ap.error("--trace traces the cubes' steps: add --cubes")
     if args.cubes:
