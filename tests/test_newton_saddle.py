@@ -83,6 +83,7 @@ def test_a_convex_problem_is_never_extended():
 
     res = _solve(lambda z, dz: 1.0, [], linearize=lin, start=(2.0, 3.0), energy=convex)
     assert res.converged and res.extensions == 0
+    # the minimiser (0, 0), to the tolerance's scale: ||g|| <= 1e-10 with curvatures >= 1
     np.testing.assert_allclose(res.x, 0.0, atol=1e-9)
 
 

@@ -464,9 +464,10 @@ def _extend(energy, max_step, x, dx, x_full, e_full):
     alpha, x_best, e_best = 1.0, x_full, e_full
     for _ in range(MAX_EXTENSIONS):
         a = 2.0 * alpha
-        if max_step(x, a * dx) < 1.0:  # the longer step would meet a contact
-            break
         x_try = x + a * dx
+        # x -> x_best is collision-free already: the CCD checks only the doubling's new half
+        if max_step(x_best, x_try - x_best) < 1.0:  # it would meet a contact
+            break
         e_try = energy(x_try)
         if not e_try < e_best:
             break
