@@ -24,6 +24,11 @@ pair is parallel: the hardest case for the barrier's Newton.
     .venv/bin/python scripts/bench_ipc.py --cubes --trace     # their Newton iterations, logged
     .venv/bin/python scripts/bench_ipc.py --no-saddle-extension  # Newton as before the doubling
     .venv/bin/python scripts/bench_ipc.py --cubes --projection abs   # IPC's other pair projection
+    .venv/bin/python scripts/bench_ipc.py --velocity-tol 1e-3  # both sides with IPC's step rule
+
+``--velocity-tol v`` (m/s) gives both sides ``fe.ImplicitEuler(velocity_tol=v)``: Newton also
+stops after a whole step that moves no DOF by more than v * dt (IPC's convergence rule, besides
+the force tolerance).
 """
 
 from __future__ import annotations
@@ -83,7 +88,7 @@ def _own_factors(model):
 def time_step(model, state, dt, solver=None):
     """Wall time (s) of one implicit Euler step from ``state``, its stats and its end state."""
     _own_factors(model)
-    ie = fe.ImplicitEuler(max_iter=MAX_ITER, linear_solver=solver)
+    ie = implicit_euler(solver)
     t0 = time.perf_counter()
     out = ie.step(model, state, dt)
     return time.perf_counter() - t0, ie.last_stats, out
@@ -91,6 +96,13 @@ def time_step(model, state, dt, solver=None):
 
 #: Newton iterations allowed per step (both models): an impact takes more than the default 30
 MAX_ITER = 200
+#: Velocity tolerance (m/s) of both models' Newton (``--velocity-tol``; 0: the force rule alone)
+VELOCITY_TOL = 0.0
+
+
+def implicit_euler(solver=None):
+    """The integrator both sides use: ``max_iter=MAX_ITER``, ``velocity_tol=VELOCITY_TOL``."""
+    return fe.ImplicitEuler(max_iter=MAX_ITER, linear_solver=solver, velocity_tol=VELOCITY_TOL)
 
 
 def drop_runs(n):
@@ -122,7 +134,8 @@ def drop(n, steps, solver=None):
     steps = steps or with_ipc.steps
     print(f"two-body drop ({SCENE.name}): {m.mesh.t.shape[1]} tets, {m.ndofs} DOFs, "
           f"{m.collision_surface().n_vertices} surface vertices, dt = {dt} s, {steps} steps; "
-          f"ImplicitEuler(max_iter={MAX_ITER}), solver {'auto' if solver is None else solver!r}")
+          f"ImplicitEuler(max_iter={MAX_ITER}, velocity_tol={VELOCITY_TOL:g}), solver "
+          f"{'auto' if solver is None else solver!r}")
     # warm-up (numba, ipctk, patterns): the free model, and a throwaway copy of the IPC one (the
     # timed model's contact state, kappa, stays as the scene starts it)
     time_step(mf, state, dt, solver)
@@ -278,7 +291,7 @@ def cubes(args, solver):
         # distance goes 4.64, 5.08, 5.12, 5.12e-8 m: errors 9 %, 0.9 %, 0.02 %, and ||g|| 0.32,
         # 0.078, 7.3e-4, 6.5e-8 N), so three full steps reach the tolerance (1e-8 * 12.9 N there)
         out = trace_step("first contact", with_ipc, state, dt, solver)
-        ie = fe.ImplicitEuler(max_iter=MAX_ITER, linear_solver=solver)
+        ie = implicit_euler(solver)
         for _ in range(settle - 1):  # to the state the timed resting step starts from
             out = ie.step(with_ipc, out, dt)
         trace_step("resting contact", with_ipc, out, dt, solver)
@@ -291,7 +304,7 @@ def cubes(args, solver):
     compare("first contact", with_ipc, without, state, dt, args.repeats, solver)
     # a step in resting contact: after `settle` steps of IPC (the same step timed without contact
     # from the same state, where the elastic problem is the same)
-    ie = fe.ImplicitEuler(max_iter=MAX_ITER, linear_solver=solver)
+    ie = implicit_euler(solver)
     for _ in range(settle):
         state = ie.step(with_ipc, state, dt)
     d = with_ipc.contact.diagnostics(state.x)
@@ -319,12 +332,18 @@ def main(argv=None):
     ap.add_argument("--no-saddle-extension", action="store_true",
                     help="Newton without its doubling of projected steps at saddles (as before "
                          "issue 17's last stop; newton.MAX_EXTENSIONS = 0), for comparison")
+    ap.add_argument("--velocity-tol", type=float, default=0.0, metavar="V",
+                    help="m/s: both sides' fe.ImplicitEuler(velocity_tol=V), IPC's rule (a whole "
+                         "Newton step moving no DOF by more than V * dt ends the solve); default 0, "
+                         "the force tolerance alone")
     ap.add_argument("--trace", action="store_true",
                     help="--cubes: only the first-contact step and the resting step, once each, "
                          "logging each Newton iteration (||g||, step fraction, exact or projected) "
                          "and each CCD bound")
     args = ap.parse_args(argv)
     solver = {"auto": None, "direct": fe.DirectSolver(), "amg": fe.AMGSolver()}[args.solver]
+    global VELOCITY_TOL
+    VELOCITY_TOL = args.velocity_tol
     if args.no_saddle_extension:
         from fem_elastic.solvers import newton
 

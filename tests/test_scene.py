@@ -100,6 +100,8 @@ ERRORS = [
      None),
     ('type = "implicit_euler"', 'type = "implicit_euler"\nrtol = 2.0', "integrator.rtol", "rtol = 2.0",
      ["rtol must be in (0, 1)"], None),
+    ('type = "implicit_euler"', 'type = "implicit_euler"\nvelocity_tol = -1.0', "integrator.velocity_tol",
+     "velocity_tol = -1.0", ["velocity_tol must be a finite number >= 0"], None),
     # wrong types: a string, a boolean for a number, a float for an integer, an integer for a bool
     ("E = 1e6\n", 'E = "1e6"\n', "body.E", 'E = "1e6"', ["E must be a number", "without quotes"], None),
     ("E = 1e6\n", "E = true\n", "body.E", "E = true", ["E must be a number", "a boolean"], None),

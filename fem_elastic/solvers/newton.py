@@ -205,6 +205,7 @@ def newton_minimize(
     max_step: Callable[[np.ndarray, np.ndarray], float] | None = None,
     hessian_constant: bool = False,
     saddle_extension: bool = False,
+    step_tol: float = 0.0,
 ) -> NewtonResult:
     """Minimise ``energy`` from ``x0`` over the free DOFs.
 
@@ -295,6 +296,16 @@ def newton_minimize(
         where ``max_step`` bounds every contact of the problem (see
         :func:`saddle_extension_safe`): a longer step is otherwise checked at
         its end alone, and could pass through an obstacle.
+    step_tol : float
+        Step tolerance (m), off at 0. Also converged after a full step
+        (``alpha >= 1``: the line search, and the CCD under contact, took the
+        whole Newton step) whose largest DOF change ``max |dx|`` is at most
+        ``step_tol``: IPC's rule (Li et al. 2020, ``||p||_inf / h < eps_d``;
+        libuipc's ``velocity_tol * dt``), which an implicit step passes as a
+        velocity tolerance times h. A step the CCD cut short never counts,
+        however small: it is small because a contact blocks it, not because
+        Newton has converged.
+
     Returns
     -------
     NewtonResult
@@ -417,12 +428,21 @@ def newton_minimize(
             x_try, e_try, alpha = _extend(energy, max_step, x, dx, x_try, e_try)
             result.extensions += alpha > 1.0
         result.seconds["line_search"] += time.perf_counter() - t0
+        if step_tol > 0.0 and alpha >= 1.0 and it + 1 >= min_iter:
+            moved = float(np.abs(alpha * dx).max())
+            if moved <= step_tol:  # the whole step was taken, and it is within the tolerance
+                result.x, result.iterations, result.converged = x_try, it + 1, True
+                result.message = (f"a full Newton step of max |dx| = {moved:.3e} m <= step_tol "
+                                  f"= {step_tol:.3e} m (||g|| = {gnorm:.3e} N before it)")
+                log.debug("Newton %d: %s", it, result.message)
+                return result
         if project:
             exact = alpha >= 1.0  # full step: in the quadratic basin; else project again
         x, e = x_try, e_try
         result.x = x
         result.iterations = it + 1
-        log.debug("Newton %d: ||g|| = %.3e N, alpha = %g, Pi = %.9e J", it, gnorm, alpha, e)
+        log.debug("Newton %d: ||g|| = %.3e N, alpha = %g, Pi = %.9e J, max |step| = %.3e m", it,
+                  gnorm, alpha, e, float(np.abs(alpha * dx).max()))
     result.x = x
     return result
 

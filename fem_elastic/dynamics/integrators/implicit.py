@@ -182,6 +182,15 @@ class ImplicitEuler(_Implicit):
         ``"auto"``, ``"cholmod"``); default ``fe.AutoSolver()``. ``fe.PETScSolver()``
         (``"petsc"``) solves each step across MPI ranks (``mpiexec -n N``;
         :mod:`fem_elastic.solvers.distributed_newton`; no contact or damping there).
+    velocity_tol : float
+        Velocity tolerance (m/s), off at 0 (the default: the force rule of
+        ``rtol`` alone). Newton also stops after a whole Newton step (not cut
+        by the line search or the CCD) that moves no DOF by more than
+        ``velocity_tol * h``: the rule of IPC (Li et al. 2020) and libuipc.
+        Under frictionless IPC contact it ends the iterations that resolve a
+        slide over a saddle to the force tolerance (``scripts/bench_ipc.py
+        --velocity-tol``); the step's answer then moves by up to about that
+        much. Serial solves only (not with ``fe.PETScSolver``).
 
     Examples
     --------
@@ -199,10 +208,17 @@ class ImplicitEuler(_Implicit):
 
     def __init__(self, rtol: float = 1e-8, max_iter: int = 30,
                  mass: Literal["lumped", "consistent"] = "lumped", max_dt_cuts: int = 4,
-                 project: bool = True, linear_solver: LinearSolver | str | None = None) -> None:
+                 project: bool = True, linear_solver: LinearSolver | str | None = None,
+                 velocity_tol: float = 0.0) -> None:
         super().__init__(mass, max_dt_cuts, linear_solver)
         if not (isinstance(rtol, (int, float)) and 0 < rtol < 1):
             raise InvalidParameter(f"rtol must be in (0, 1), got {rtol!r}.")
+        if (isinstance(velocity_tol, bool) or not isinstance(velocity_tol, (int, float))
+                or not 0.0 <= velocity_tol < math.inf):
+            raise InvalidParameter(
+                f"velocity_tol must be a finite number >= 0 (m/s; 0 turns it off), got "
+                f"{velocity_tol!r}.")
+        self.velocity_tol = float(velocity_tol)
         if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 1:
             raise InvalidParameter(f"max_iter must be an integer >= 1, got {max_iter!r}.")
         self.rtol, self.max_iter, self.project = float(rtol), max_iter, bool(project)
@@ -264,7 +280,7 @@ class ImplicitEuler(_Implicit):
                     g_scale=scale if scale > 0 else None, max_iter=self.max_iter,
                     energy_roundoff=G.energy_roundoff(x0), project=self.project,
                     gradient=counted.gradient, g_floor=G.gradient_roundoff(x0),
-                    **self._solver_settings(model),
+                    step_tol=self.velocity_tol * h, **self._solver_settings(model),
                 )
                 stats.gradient_evaluations += counted.calls
                 _count_newton(stats, res)
@@ -282,6 +298,10 @@ class ImplicitEuler(_Implicit):
         """One step across the MPI ranks (fe.PETScSolver): solvers.distributed_newton."""
         from ...solvers.distributed_newton import implicit_euler_step
 
+        if self.velocity_tol > 0.0:
+            raise InvalidParameter(
+                "velocity_tol is a rule of the serial Newton; the distributed one (fe.PETScSolver) "
+                "converges on the force alone: leave velocity_tol at 0 or solve serially.")
         free, dofs, xc, vc = self._start(model, state, h)
         G = self._objective(model, state, h)
         x0 = self._prediction(G, state, h)  # the two first guesses, as serially

@@ -52,9 +52,10 @@ class Newmark(ImplicitEuler):
 
     def __init__(self, rtol: float = 1e-8, max_iter: int = 30,
                  mass: Literal["lumped", "consistent"] = "lumped", max_dt_cuts: int = 4,
-                 project: bool = True, linear_solver: LinearSolver | str | None = None) -> None:
+                 project: bool = True, linear_solver: LinearSolver | str | None = None,
+                 velocity_tol: float = 0.0) -> None:
         super().__init__(rtol=rtol, max_iter=max_iter, mass=mass, max_dt_cuts=max_dt_cuts,
-                         project=project, linear_solver=linear_solver)
+                         project=project, linear_solver=linear_solver, velocity_tol=velocity_tol)
         self._last = (None, None)  # (state returned last, its acceleration)
 
     def acceleration(self, model: AnyModel, state: State) -> np.ndarray:

@@ -168,7 +168,7 @@ class Trapezoid(ImplicitEuler):
     (``max_dt_cuts``), recorded in ``last_stats.cuts``.
 
     Parameters are those of :class:`fe.ImplicitEuler`: ``rtol``, ``max_iter``,
-    ``mass``, ``max_dt_cuts``, ``project``, ``linear_solver``.
+    ``mass``, ``max_dt_cuts``, ``project``, ``linear_solver``, ``velocity_tol``.
 
     Examples
     --------
@@ -191,8 +191,9 @@ class Trapezoid(ImplicitEuler):
 
     def __init__(self, rtol: float = 1e-8, max_iter: int = 30,
                  mass: Literal["lumped", "consistent"] = "lumped", max_dt_cuts: int = 4,
-                 project: bool = True, linear_solver: LinearSolver | str | None = None) -> None:
-        super().__init__(rtol, max_iter, mass, max_dt_cuts, project, linear_solver)
+                 project: bool = True, linear_solver: LinearSolver | str | None = None,
+                 velocity_tol: float = 0.0) -> None:
+        super().__init__(rtol, max_iter, mass, max_dt_cuts, project, linear_solver, velocity_tol)
         self._force = (None, None, None)  # (model or None: the next one, positions, dPi/dx there)
         self._g0 = None  # dPi/dx at the start of the step being taken
         self._G = None  # its potential
