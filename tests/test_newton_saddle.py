@@ -130,3 +130,39 @@ def test_an_extension_never_steps_past_the_ccd_bound():
     assert max(z[1] for z in evaluated) < wall
     assert res.extensions >= 1  # the first steps, far from the wall, were extended
     assert not res.converged and res.x[1] > 0.4  # it went towards the wall, and stopped short
+
+
+def test_under_contact_an_indefinite_exact_tangent_above_the_lu_size_is_projected(monkeypatch):
+    """fe.AutoSolver: where CHOLMOD proves the exact tangent indefinite, SuperLU solves it up
+    to newton.CONTACT_EXACT_LU_DOFS unknowns under contact; above, Newton projects at once."""
+    import pytest
+
+    pytest.importorskip("sksparse")
+    import fem_elastic as fe
+    from fem_elastic.solvers import linear_solvers, newton
+
+    lus = []
+    lu_solve = linear_solvers.DirectSolver.solve
+
+    def counted(self, A, b, near_null=None, rtol=None):
+        lus.append(A.shape[0])
+        return lu_solve(self, A, b, near_null, rtol)
+
+    monkeypatch.setattr(linear_solvers.DirectSolver, "solve", counted)
+
+    def solve():
+        return newton_minimize(_energy, _linearize, np.array([0.3, 1e-3]), np.ones(2, dtype=bool),
+                               rtol=1e-10, g_scale=1.0, max_iter=200, max_step=lambda z, dz: 1.0,
+                               linear_solver=fe.AutoSolver(), saddle_extension=True)
+
+    below = solve()  # 2 unknowns <= 5,000: the indefinite exact tangents go to SuperLU
+    assert below.converged and lus, "the exact tangent at the saddle was never solved by LU"
+    lus.clear()
+    monkeypatch.setattr(newton, "CONTACT_EXACT_LU_DOFS", 1)  # as if the system were larger
+    above = solve()
+    assert above.converged and lus == []
+    np.testing.assert_allclose(above.x, below.x, atol=1e-9)  # the same minimiser (see above)
+    # without contact the LU stays up to max_direct_dofs, whatever the contact's limit
+    newton_minimize(_energy, _linearize, np.array([0.3, 1e-3]), np.ones(2, dtype=bool), rtol=1e-10,
+                    g_scale=1.0, max_iter=200, linear_solver=fe.AutoSolver())
+    assert lus

@@ -502,12 +502,19 @@ class AutoSolver:
     max_factor_bytes : float, optional
         Largest estimated CHOLMOD factor (bytes); 0 never uses CHOLMOD. Default: half the
         free memory (2 GiB where it cannot be read).
+    max_exact_lu_dofs : int, optional
+        Without ``fallback`` (:meth:`strict`, Newton on an exact tangent): the largest
+        system that CHOLMOD proves not positive definite which SuperLU still solves
+        (default ``max_direct_dofs``); above it :class:`LinearSolverFailed` is raised and
+        Newton projects the tangent. Newton under IPC contact lowers it
+        (:data:`fem_elastic.solvers.newton.CONTACT_EXACT_LU_DOFS`).
     """
 
     max_direct_dofs: int = 20_000
     amg: AMGSolver = AMGSolver()
     fallback: bool = True
     max_factor_bytes: float | None = None
+    max_exact_lu_dofs: int | None = None
 
     def uses_cholmod(self, ndofs: int, nnz: int) -> bool:
         """Whether the rule picks CHOLMOD for a matrix of ``ndofs`` rows and ``nnz`` entries."""
@@ -532,7 +539,9 @@ class AutoSolver:
             try:
                 return shared_solver().strict().solve(A, b)
             except LinearSolverFailed as exc:  # not positive definite
-                if not self.fallback and A.shape[0] > self.max_direct_dofs:
+                lu_limit = self.max_direct_dofs if self.max_exact_lu_dofs is None \
+                    else min(self.max_direct_dofs, self.max_exact_lu_dofs)
+                if not self.fallback and A.shape[0] > lu_limit:
                     raise  # Newton on an exact tangent too large for LU: it projects (as after AMG-CG)
                 # what the rule without CHOLMOD does at this size: SuperLU, whose direction
                 # Newton then tests for descent (an exact tangent near a saddle still gives one)
@@ -547,14 +556,17 @@ class AutoSolver:
                 log.warning("%s Falling back to the direct solver.", exc)
         return DirectSolver().solve(A, b, near_null)
 
-    def strict(self) -> "AutoSolver":
+    def strict(self, max_lu_dofs: int | None = None) -> "AutoSolver":
         """The same solver, raising :class:`LinearSolverFailed` instead of falling back.
 
         Newton uses it on an exact (possibly indefinite) tangent, where the
         better remedy for a stalled CG, or a Cholesky that finds the tangent
-        indefinite, is the PSD projection, not a large LU.
+        indefinite, is the PSD projection, not a large LU. ``max_lu_dofs``:
+        the largest such tangent still solved by SuperLU (``max_exact_lu_dofs``).
         """
-        return replace(self, fallback=False)
+        if max_lu_dofs is None:
+            return replace(self, fallback=False)
+        return replace(self, fallback=False, max_exact_lu_dofs=max_lu_dofs)
 
     def reusing(self, ndofs: int, nnz: int | None = None) -> ReusedAMG | AutoSolver:
         """The solver a Newton solve of ``ndofs`` unknowns should use for all its solves.

@@ -376,7 +376,8 @@ def newton_minimize(
         else:
             dx, slope, H, exact = _direction_trial(
                 solver, linearize, x, H, g, free, pattern, near_null, result, eta, exact, project,
-                constrained=H is constrained_H)
+                constrained=H is constrained_H,
+                lu_dofs=CONTACT_EXACT_LU_DOFS if max_step is not None else None)
             # constrain() edits a matrix of the pattern in place: a kept Hessian needs it once
             constrained_H = H if pattern is not None and pattern.owns(H) else None
         if not slope < 0:  # still no descent direction: steepest descent
@@ -449,6 +450,16 @@ def newton_minimize(
 
 #: Most doublings of a projected step at a saddle (:func:`_extend`): up to 64 times its length
 MAX_EXTENSIONS = 6
+
+#: Under IPC contact (``max_step`` given), the largest exact tangent that CHOLMOD proves
+#: indefinite which ``fe.AutoSolver`` still solves by SuperLU; above it Newton projects the
+#: tangent at once. On the drop's incremental potential (``scripts/bench_ipc.py``) SuperLU
+#: costs 1.1x CHOLMOD's analysis and factor at 1,590 DOFs, 1.9x at 4,578 and 7.4x at 13,830;
+#: an LU that gave no descent direction (often, at the barrier's saddles) costs a projected
+#: solve on top. Above this size the 21,870-tet drop took 206 s instead of 294 s. Without
+#: contact the LU is kept up to ``max_direct_dofs``: there an indefinite exact tangent is a
+#: body under compression, whose projected Newton converges only linearly.
+CONTACT_EXACT_LU_DOFS = 5_000
 
 
 def saddle_extension_safe(model) -> bool:
@@ -539,13 +550,18 @@ def _direction(solver, H, g, free, pattern, near_null, result, rtol=None, psd=No
 
 
 def _direction_trial(solver, linearize, x, H, g, free, pattern, near_null, result, eta, exact,
-                     project, constrained=False):
+                     project, constrained=False, lu_dofs=None):
     """The direction with a solver that cannot stop CG at negative curvature (a direct one,
     a user's, or any with ``_REUSE_AMG`` off): on an exact tangent it is solved first, and
     when its direction is no descent direction the projected tangent is assembled and solved
-    too (the first solve is then wasted, but counted). Returns dx, slope, H, exact."""
+    too (the first solve is then wasted, but counted). ``lu_dofs``: the largest exact tangent
+    that CHOLMOD proves indefinite which ``fe.AutoSolver`` still solves by SuperLU
+    (:data:`CONTACT_EXACT_LU_DOFS` under contact). Returns dx, slope, H, exact."""
     # on an exact tangent, a stalled CG is answered by projecting, not by a big LU
-    strict = solver.strict() if exact and project and hasattr(solver, "strict") else solver
+    strict = solver
+    if exact and project and hasattr(solver, "strict"):
+        strict = solver.strict(max_lu_dofs=lu_dofs) if lu_dofs is not None \
+            and isinstance(solver, AutoSolver) else solver.strict()
     try:
         dx, slope = _direction(strict, H, g, free, pattern, near_null, result, eta, constrained=constrained)
     except LinearSolverFailed:
