@@ -10,7 +10,7 @@ stays in both). The two alternate in one process, one pair per step, so the mach
 weighs on both alike; each keeps its own CHOLMOD analysis and factor, as a run of it alone would. The table gives each step's Newton iterations and times; the summary
 splits the steps into those where no IPC pair is within dhat (the contact's fixed cost: broad
 phase, CCD, an empty barrier) and those with IPC pairs, and gives the median, the worst step and
-the whole drop. Both solves use ``max_iter=200``: the impact of a 21,870-tet drop takes 90
+the whole drop. Both solves use ``max_iter=200``: the impact of a 21,870-tet drop takes 67
 Newton iterations, more than ImplicitEuler's default 30.
 
 ``--cubes``: two aligned cubes, the upper one starting half of dhat above the lower one, timed

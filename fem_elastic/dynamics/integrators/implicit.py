@@ -95,7 +95,7 @@ class _Implicit(Integrator):
             if why.startswith("Newton did not converge (no convergence") \
                     and _contact_max_step(model) is not None:
                 # halving dt does not shorten an IPC impact: every Newton step is bounded by the
-                # CCD, and the gap still closes over decades (74 iterations for the 21,870-tet
+                # CCD, and the gap still closes over decades (67 iterations for the 21,870-tet
                 # drop of scripts/bench_ipc.py)
                 hint = (f"An impact under IPC contact takes many CCD-bounded Newton iterations, "
                         f"whatever the step: raise max_iter (e.g. fe.{self.name}(max_iter=200); "
@@ -168,7 +168,7 @@ class ImplicitEuler(_Implicit):
         Most Newton iterations per (sub-)step. An impact under IPC contact
         (``fe.IPCContact``) needs more than the default: every Newton step is
         bounded by the CCD while the gap closes from dhat to the barrier's
-        equilibrium (the 21,870-tet drop of ``scripts/bench_ipc.py`` takes 74
+        equilibrium (the 21,870-tet drop of ``scripts/bench_ipc.py`` takes 67
         on its impact step); give 200 there.
     mass : {"lumped", "consistent"}
         Mass matrix in the inertia term.
