@@ -166,3 +166,12 @@ def test_under_contact_an_indefinite_exact_tangent_above_the_lu_size_is_projecte
     newton_minimize(_energy, _linearize, np.array([0.3, 1e-3]), np.ones(2, dtype=bool), rtol=1e-10,
                     g_scale=1.0, max_iter=200, linear_solver=fe.AutoSolver())
     assert lus
+
+
+def test_a_users_lower_exact_lu_limit_is_kept_under_contact():
+    import fem_elastic as fe
+
+    assert fe.AutoSolver().strict(max_lu_dofs=5000).max_exact_lu_dofs == 5000
+    assert fe.AutoSolver(max_exact_lu_dofs=100).strict(max_lu_dofs=5000).max_exact_lu_dofs == 100
+    assert fe.AutoSolver(max_exact_lu_dofs=10**6).strict(max_lu_dofs=5000).max_exact_lu_dofs == 5000
+    assert fe.AutoSolver().strict().fallback is False

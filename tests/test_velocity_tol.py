@@ -56,8 +56,39 @@ def test_a_step_the_ccd_cut_never_counts_as_converged():
 
     res = _solve(step_tol=1e6, max_step=max_step)
     assert res.converged and "step_tol" in res.message
-    assert res.iterations == 4  # three cut steps, then the first whole one ends it
-    assert _solve(step_tol=1e6, max_step=lambda x, dx: 1.0).iterations == 1
+    # three cut steps (projected), one whole projected step, then the first whole step on the
+    # exact tangent ends it
+    assert res.iterations == 5
+    # uncut: the first step is projected (it never counts), the second, exact, ends it
+    assert _solve(step_tol=1e6, max_step=lambda x, dx: 1.0).iterations == 2
+
+
+A, C = 1.0, 5.0  # the saddle of tests/test_newton_saddle.py: Pi = x^2/2 - a y^2/2 + y^4/4
+
+
+def _saddle_energy(z):
+    return 0.5 * z[0] ** 2 - 0.5 * A * z[1] ** 2 + 0.25 * z[1] ** 4
+
+
+def _saddle_linearize(z, project):
+    hyy = -A + 3.0 * z[1] ** 2
+    if project and hyy < C:  # IPC's clamp: a negative curvature keeps only the stiffness c
+        hyy = max(hyy, 0.0) + C
+    return np.array([z[0], -A * z[1] + z[1] ** 3]), sp.csr_matrix(np.diag([1.0, hyy]))
+
+
+@pytest.mark.parametrize("project", [True, False])
+def test_a_small_step_at_a_saddle_does_not_end_newton(project):
+    """Beside the saddle at the origin every step is small (1e-4 m here), but Newton is not
+    converged: projected steps are small because the clamp hides the negative curvature, exact
+    ones because the tangent is indefinite (no descent: steepest descent). Neither may end the
+    solve; it goes on to the minimiser y = 1."""
+    res = newton_minimize(_saddle_energy, _saddle_linearize, np.array([0.0, 1e-4]),
+                          np.ones(2, dtype=bool), rtol=1e-10, g_scale=1.0, max_iter=200,
+                          linear_solver="direct", project=project, step_tol=1e-3)
+    assert res.converged
+    # within step_tol of the minimiser (0, 1); a stop at the saddle would leave y ~ 1e-4
+    np.testing.assert_allclose(res.x, [0.0, 1.0], atol=1e-3)
 
 
 def _beam():
@@ -92,10 +123,27 @@ def test_bad_velocity_tol_is_refused(bad):
 
 @pytest.mark.parametrize("cls", [fe.Newmark, fe.Trapezoid])
 def test_newmark_and_trapezoid_take_velocity_tol_too(cls):
-    model = _beam()
-    out = cls(velocity_tol=1e-3).step(model, fe.State.rest(model), 0.01)
-    ref = cls().step(model, fe.State.rest(model), 0.01)
-    assert np.abs(out.x - ref.x).max() <= 1e-3 * 0.01  # velocity_tol * h, as above
+    """Their end velocity is 2 (x1 - x0) / h - v0: the rule's step is velocity_tol * h / 2, so
+    the velocity, not only the position, stays within velocity_tol of the strict answer."""
+    # h = 0.1 s: 4-5 Newton iterations a step (at 0.05 s the rule, on the exact tangent only,
+    # saves none)
+    model, h, v_tol = _beam(), 0.1, 1e-3
+    loose, strict = cls(velocity_tol=v_tol), cls()
+    assert loose.velocity_tol == v_tol
+    state, its_loose, its_strict = fe.State.rest(model), 0, 0
+    for _ in range(4):
+        out, ref = loose.step(model, state, h), strict.step(model, state, h)
+        its_loose += loose.last_stats.newton_iterations
+        its_strict += strict.last_stats.newton_iterations
+        assert np.abs(out.v - ref.v).max() <= v_tol
+        state = ref
+    assert its_loose < its_strict, (its_loose, its_strict)
+
+
+def test_velocity_tol_is_refused_with_the_distributed_newton():
+    pytest.importorskip("petsc4py")
+    with pytest.raises(fe.InvalidParameter, match="solve serially"):
+        fe.ImplicitEuler(velocity_tol=1e-3, linear_solver=fe.PETScSolver())
 
 
 def test_a_scene_sets_velocity_tol():

@@ -562,10 +562,13 @@ class AutoSolver:
         Newton uses it on an exact (possibly indefinite) tangent, where the
         better remedy for a stalled CG, or a Cholesky that finds the tangent
         indefinite, is the PSD projection, not a large LU. ``max_lu_dofs``:
-        the largest such tangent still solved by SuperLU (``max_exact_lu_dofs``).
+        the largest such tangent still solved by SuperLU (``max_exact_lu_dofs``,
+        if this solver's own is not lower).
         """
         if max_lu_dofs is None:
             return replace(self, fallback=False)
+        if self.max_exact_lu_dofs is not None:  # a user's own limit stays when it is lower
+            max_lu_dofs = min(self.max_exact_lu_dofs, max_lu_dofs)
         return replace(self, fallback=False, max_exact_lu_dofs=max_lu_dofs)
 
     def reusing(self, ndofs: int, nnz: int | None = None) -> ReusedAMG | AutoSolver:

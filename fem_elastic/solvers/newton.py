@@ -299,12 +299,16 @@ def newton_minimize(
     step_tol : float
         Step tolerance (m), off at 0. Also converged after a full step
         (``alpha >= 1``: the line search, and the CCD under contact, took the
-        whole Newton step) whose largest DOF change ``max |dx|`` is at most
-        ``step_tol``: IPC's rule (Li et al. 2020, ``||p||_inf / h < eps_d``;
-        libuipc's ``velocity_tol * dt``), which an implicit step passes as a
-        velocity tolerance times h. A step the CCD cut short never counts,
-        however small: it is small because a contact blocks it, not because
-        Newton has converged.
+        whole Newton step) on the exact tangent whose largest DOF change
+        ``max |dx|`` is at most ``step_tol``: IPC's rule (Li et al. 2020,
+        ``||p||_inf / h < eps_d``; libuipc's ``velocity_tol * dt``), which an
+        implicit step passes as a velocity tolerance times h. Only such a step
+        counts: Newton is then in its quadratic regime and the error left is
+        of the order of the step squared over the problem's length scale. A
+        step the CCD cut short is small because a contact blocks it; a
+        projected one may be small because the projection hides a saddle (and
+        with ``project`` the first step is always projected); a steepest
+        descent step is no Newton step.
 
     Returns
     -------
@@ -380,6 +384,9 @@ def newton_minimize(
                 lu_dofs=CONTACT_EXACT_LU_DOFS if max_step is not None else None)
             # constrain() edits a matrix of the pattern in place: a kept Hessian needs it once
             constrained_H = H if pattern is not None and pattern.owns(H) else None
+        # a step that can end the solve by step_tol: Newton's own on the exact tangent (no
+        # projection that may hide a saddle, no steepest descent), in its quadratic regime
+        exact_newton_step = bool(exact and slope < 0)
         if not slope < 0:  # still no descent direction: steepest descent
             log.debug("Newton direction is not a descent direction; using -g")
             # keep the Newton step's length; without one, a step of -g / max diag(H)
@@ -429,7 +436,7 @@ def newton_minimize(
             x_try, e_try, alpha = _extend(energy, max_step, x, dx, x_try, e_try)
             result.extensions += alpha > 1.0
         result.seconds["line_search"] += time.perf_counter() - t0
-        if step_tol > 0.0 and alpha >= 1.0 and it + 1 >= min_iter:
+        if step_tol > 0.0 and alpha >= 1.0 and exact_newton_step and it + 1 >= min_iter:
             moved = float(np.abs(alpha * dx).max())
             if moved <= step_tol:  # the whole step was taken, and it is within the tolerance
                 result.x, result.iterations, result.converged = x_try, it + 1, True
@@ -456,7 +463,7 @@ MAX_EXTENSIONS = 6
 #: tangent at once. On the drop's incremental potential (``scripts/bench_ipc.py``) SuperLU
 #: costs 1.1x CHOLMOD's analysis and factor at 1,590 DOFs, 1.9x at 4,578 and 7.4x at 13,830;
 #: an LU that gave no descent direction (often, at the barrier's saddles) costs a projected
-#: solve on top. Above this size the 21,870-tet drop took 206 s instead of 294 s. Without
+#: solve on top. Above this size the 21,870-tet drop took 206-217 s instead of 252-294 s. Without
 #: contact the LU is kept up to ``max_direct_dofs``: there an indefinite exact tangent is a
 #: body under compression, whose projected Newton converges only linearly.
 CONTACT_EXACT_LU_DOFS = 5_000

@@ -153,6 +153,11 @@ def _count_newton(stats, res) -> None:
         stats.seconds[k] = stats.seconds.get(k, 0.0) + v
 
 
+_PETSC_VELOCITY_TOL = (
+    "velocity_tol is a rule of the serial Newton; the distributed one (fe.PETScSolver) converges "
+    "on the force alone: leave velocity_tol at 0 or solve serially.")
+
+
 class ImplicitEuler(_Implicit):
     """Backward Euler by minimising the incremental potential with Newton.
 
@@ -186,11 +191,14 @@ class ImplicitEuler(_Implicit):
         Velocity tolerance (m/s), off at 0 (the default: the force rule of
         ``rtol`` alone). Newton also stops after a whole Newton step (not cut
         by the line search or the CCD) that moves no DOF by more than
-        ``velocity_tol * h``: the rule of IPC (Li et al. 2020) and libuipc.
-        Under frictionless IPC contact it ends the iterations that resolve a
-        slide over a saddle to the force tolerance (``scripts/bench_ipc.py
-        --velocity-tol``); the step's answer then moves by up to about that
-        much. Serial solves only (not with ``fe.PETScSolver``).
+        ``velocity_tol * h`` (``velocity_tol * h / 2`` for fe.Newmark and
+        fe.Trapezoid, whose end velocity is ``2 (x1 - x0) / h - v0``), taken on
+        the exact tangent: the rule of IPC (Li et al. 2020) and libuipc.
+        Newton is then in its quadratic regime, and the end velocity lies
+        within about ``velocity_tol`` of the force-converged one. It spares
+        the last iterations of a step (``scripts/bench_ipc.py
+        --velocity-tol``: a fifth of the IPC drop's time). Serial solves only
+        (not with ``fe.PETScSolver``).
 
     Examples
     --------
@@ -205,6 +213,10 @@ class ImplicitEuler(_Implicit):
     """
 
     order = 1
+    #: position change (m) per unit of velocity change (m/s) at the step's end, over h: the
+    #: scale of ``velocity_tol`` (x1 = x0 + h v1 here; Newmark and the trapezoid, whose
+    #: v1 = 2 (x1 - x0) / h - v0, halve it)
+    _step_per_velocity = 1.0
 
     def __init__(self, rtol: float = 1e-8, max_iter: int = 30,
                  mass: Literal["lumped", "consistent"] = "lumped", max_dt_cuts: int = 4,
@@ -219,6 +231,9 @@ class ImplicitEuler(_Implicit):
                 f"velocity_tol must be a finite number >= 0 (m/s; 0 turns it off), got "
                 f"{velocity_tol!r}.")
         self.velocity_tol = float(velocity_tol)
+        if self.velocity_tol > 0.0 and type(self) is ImplicitEuler \
+                and isinstance(self.linear_solver, PETScSolver):
+            raise InvalidParameter(_PETSC_VELOCITY_TOL)
         if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 1:
             raise InvalidParameter(f"max_iter must be an integer >= 1, got {max_iter!r}.")
         self.rtol, self.max_iter, self.project = float(rtol), max_iter, bool(project)
@@ -280,7 +295,8 @@ class ImplicitEuler(_Implicit):
                     g_scale=scale if scale > 0 else None, max_iter=self.max_iter,
                     energy_roundoff=G.energy_roundoff(x0), project=self.project,
                     gradient=counted.gradient, g_floor=G.gradient_roundoff(x0),
-                    step_tol=self.velocity_tol * h, **self._solver_settings(model),
+                    step_tol=self.velocity_tol * h * self._step_per_velocity,
+                    **self._solver_settings(model),
                 )
                 stats.gradient_evaluations += counted.calls
                 _count_newton(stats, res)
@@ -298,10 +314,8 @@ class ImplicitEuler(_Implicit):
         """One step across the MPI ranks (fe.PETScSolver): solvers.distributed_newton."""
         from ...solvers.distributed_newton import implicit_euler_step
 
-        if self.velocity_tol > 0.0:
-            raise InvalidParameter(
-                "velocity_tol is a rule of the serial Newton; the distributed one (fe.PETScSolver) "
-                "converges on the force alone: leave velocity_tol at 0 or solve serially.")
+        if self.velocity_tol > 0.0:  # (set after construction)
+            raise InvalidParameter(_PETSC_VELOCITY_TOL)
         free, dofs, xc, vc = self._start(model, state, h)
         G = self._objective(model, state, h)
         x0 = self._prediction(G, state, h)  # the two first guesses, as serially

@@ -48,6 +48,7 @@ class Newmark(ImplicitEuler):
     """
 
     order = 2
+    _step_per_velocity = 0.5  # v1 = 2 (x1 - x0) / h - v0: a position error counts twice
     _last: tuple[Any, Any]  # (State returned last, its acceleration a, m/s^2), or (None, None)
 
     def __init__(self, rtol: float = 1e-8, max_iter: int = 30,

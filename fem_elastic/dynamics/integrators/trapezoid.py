@@ -186,6 +186,7 @@ class Trapezoid(ImplicitEuler):
     """
 
     order = 2
+    _step_per_velocity = 0.5  # v1 = 2 (x1 - x0) / h - v0: a position error counts twice
     # (model or None: the next one, positions, dPi/dx there), all None when nothing is remembered
     _force: tuple[Any, Any, Any]
 
