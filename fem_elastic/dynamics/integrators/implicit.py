@@ -197,7 +197,7 @@ class ImplicitEuler(_Implicit):
         Newton is then in its quadratic regime, and the end velocity lies
         within about ``velocity_tol`` of the force-converged one. It spares
         the last iterations of a step (``scripts/bench_ipc.py
-        --velocity-tol``: a fifth of the IPC drop's time). Serial solves only
+        --velocity-tol``: a sixth of the IPC drop's time). Serial solves only
         (not with ``fe.PETScSolver``).
 
     Examples
