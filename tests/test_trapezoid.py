@@ -291,6 +291,8 @@ def test_resumed_run_is_bit_for_bit_the_uninterrupted_one(tmp_path, case):
 # -- scene files -------------------------------------------------------------------------------
 def test_scene_files_reach_the_options():
     assert set(integrator_options("trapezoid")) == {"rtol", "max_iter", "mass", "max_dt_cuts", "project",
-                                                    "linear_solver"}
-    tr = make_integrator({"type": "trapezoid", "rtol": 1e-6, "mass": "consistent", "max_dt_cuts": 2})
-    assert isinstance(tr, TR) and (tr.rtol, tr.mass, tr.max_dt_cuts) == (1e-6, "consistent", 2)
+                                                    "linear_solver", "velocity_tol"}
+    tr = make_integrator({"type": "trapezoid", "rtol": 1e-6, "mass": "consistent", "max_dt_cuts": 2,
+                          "velocity_tol": 1e-3})
+    assert isinstance(tr, TR) and (tr.rtol, tr.mass, tr.max_dt_cuts, tr.velocity_tol) == (
+        1e-6, "consistent", 2, 1e-3)
