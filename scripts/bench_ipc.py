@@ -27,8 +27,8 @@ pair is parallel: the hardest case for the barrier's Newton.
     .venv/bin/python scripts/bench_ipc.py --velocity-tol 1e-3  # both sides with IPC's step rule
 
 ``--velocity-tol v`` (m/s) gives both sides ``fe.ImplicitEuler(velocity_tol=v)``: Newton also
-stops after a whole step that moves no DOF by more than v * dt (IPC's convergence rule, besides
-the force tolerance).
+stops after a whole step on the exact tangent that moves no DOF by more than v * dt (IPC's
+convergence rule, besides the force tolerance).
 """
 
 from __future__ import annotations
@@ -331,9 +331,9 @@ def main(argv=None):
     ap.add_argument("--no-broad-phase", action="store_true", help="skip the broad-phase scaling")
     ap.add_argument("--no-saddle-extension", action="store_true",
                     help="Newton without its doubling of projected steps at saddles (as before "
-                         "issue 17's last stop; newton.MAX_EXTENSIONS = 0), for comparison")
+                         "commit 903847c; newton.MAX_EXTENSIONS = 0), for comparison")
     ap.add_argument("--velocity-tol", type=float, default=0.0, metavar="V",
-                    help="m/s: both sides' fe.ImplicitEuler(velocity_tol=V), IPC's rule (a whole "
+                    help="m/s: both sides' fe.ImplicitEuler(velocity_tol=V), IPC's rule (a whole exact "
                          "Newton step moving no DOF by more than V * dt ends the solve); default 0, "
                          "the force tolerance alone")
     ap.add_argument("--trace", action="store_true",

@@ -16,6 +16,8 @@ import scipy.sparse as sp
 
 import fem_elastic as fe
 from fem_elastic.solvers.newton import newton_minimize
+from test_newton_saddle import _energy as saddle_energy  # x^2/2 - y^2/2 + y^4/4, minimiser y = 1
+from test_newton_saddle import _linearize as saddle_linearize  # with IPC's clamp, c = 5
 
 TARGET = np.array([0.3, -0.2, 0.5])  # the minimiser of the model problem
 
@@ -63,27 +65,13 @@ def test_a_step_the_ccd_cut_never_counts_as_converged():
     assert _solve(step_tol=1e6, max_step=lambda x, dx: 1.0).iterations == 2
 
 
-A, C = 1.0, 5.0  # the saddle of tests/test_newton_saddle.py: Pi = x^2/2 - a y^2/2 + y^4/4
-
-
-def _saddle_energy(z):
-    return 0.5 * z[0] ** 2 - 0.5 * A * z[1] ** 2 + 0.25 * z[1] ** 4
-
-
-def _saddle_linearize(z, project):
-    hyy = -A + 3.0 * z[1] ** 2
-    if project and hyy < C:  # IPC's clamp: a negative curvature keeps only the stiffness c
-        hyy = max(hyy, 0.0) + C
-    return np.array([z[0], -A * z[1] + z[1] ** 3]), sp.csr_matrix(np.diag([1.0, hyy]))
-
-
 @pytest.mark.parametrize("project", [True, False])
 def test_a_small_step_at_a_saddle_does_not_end_newton(project):
-    """Beside the saddle at the origin every step is small (1e-4 m here), but Newton is not
-    converged: projected steps are small because the clamp hides the negative curvature, exact
-    ones because the tangent is indefinite (no descent: steepest descent). Neither may end the
-    solve; it goes on to the minimiser y = 1."""
-    res = newton_minimize(_saddle_energy, _saddle_linearize, np.array([0.0, 1e-4]),
+    """The saddle model of tests/test_newton_saddle.py. Beside the saddle at the origin every
+    step is small (1e-4 m here), but Newton is not converged: projected steps are small because
+    the clamp hides the negative curvature, exact ones because the tangent is indefinite (no
+    descent: steepest descent). Neither may end the solve; it goes on to the minimiser y = 1."""
+    res = newton_minimize(saddle_energy, saddle_linearize, np.array([0.0, 1e-4]),
                           np.ones(2, dtype=bool), rtol=1e-10, g_scale=1.0, max_iter=200,
                           linear_solver="direct", project=project, step_tol=1e-3)
     assert res.converged

@@ -54,6 +54,7 @@ class DistributedNewton:
     linear_setups: int = 0  # preconditioner set-ups (GAMG hierarchies, LU factors): one per tangent
     message: str = ""
     seconds: dict = field(default_factory=lambda: {"linearize": 0.0, "solve": 0.0, "line_search": 0.0})
+    extensions: int = 0  # steps lengthened at a saddle: never here (no contact across ranks)
 
 
 def minimize(problem, ksp, x, *, s: float = 1.0, y=None, k: float = 0.0, rtol: float = 1e-8,

@@ -436,21 +436,20 @@ def newton_minimize(
             x_try, e_try, alpha = _extend(energy, max_step, x, dx, x_try, e_try)
             result.extensions += alpha > 1.0
         result.seconds["line_search"] += time.perf_counter() - t0
-        if step_tol > 0.0 and alpha >= 1.0 and exact_newton_step and it + 1 >= min_iter:
-            moved = float(np.abs(alpha * dx).max())
-            if moved <= step_tol:  # the whole step was taken, and it is within the tolerance
-                result.x, result.iterations, result.converged = x_try, it + 1, True
-                result.message = (f"a full Newton step of max |dx| = {moved:.3e} m <= step_tol "
-                                  f"= {step_tol:.3e} m (||g|| = {gnorm:.3e} N before it)")
-                log.debug("Newton %d: %s", it, result.message)
-                return result
         if project:
             exact = alpha >= 1.0  # full step: in the quadratic basin; else project again
         x, e = x_try, e_try
         result.x = x
         result.iterations = it + 1
+        moved = float(np.abs(alpha * dx).max())  # the step's largest DOF change (m)
         log.debug("Newton %d: ||g|| = %.3e N, alpha = %g, Pi = %.9e J, max |step| = %.3e m", it,
-                  gnorm, alpha, e, float(np.abs(alpha * dx).max()))
+                  gnorm, alpha, e, moved)
+        if step_tol > 0.0 and alpha >= 1.0 and exact_newton_step and it + 1 >= min_iter \
+                and moved <= step_tol:  # the whole exact Newton step, within the tolerance
+            result.converged = True
+            result.message = (f"a full Newton step of max |dx| = {moved:.3e} m <= step_tol "
+                              f"= {step_tol:.3e} m (||g|| = {gnorm:.3e} N before it)")
+            break
     result.x = x
     return result
 

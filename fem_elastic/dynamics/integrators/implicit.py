@@ -148,7 +148,7 @@ def _count_newton(stats, res) -> None:
     stats.linear_iterations += res.linear_iterations
     stats.linear_solves += res.linear_solves
     stats.linear_setups += res.linear_setups
-    stats.extensions += getattr(res, "extensions", 0)  # (the distributed Newton has none)
+    stats.extensions += res.extensions
     for k, v in res.seconds.items():
         stats.seconds[k] = stats.seconds.get(k, 0.0) + v
 
