@@ -10,8 +10,9 @@ stays in both). The two alternate in one process, one pair per step, so the mach
 weighs on both alike; each keeps its own CHOLMOD analysis and factor, as a run of it alone would. The table gives each step's Newton iterations and times; the summary
 splits the steps into those where no IPC pair is within dhat (the contact's fixed cost: broad
 phase, CCD, an empty barrier) and those with IPC pairs, and gives the median, the worst step and
-the whole drop. Both solves use ``max_iter=200``: the impact of a 21,870-tet drop takes 67
-Newton iterations, more than ImplicitEuler's default 30.
+the whole drop. Both solves use ``max_iter=200``: the impact of a 21,870-tet drop takes 18
+Newton iterations with the scene's barrier stiffness (kappa = 1e7 N/m^3) and 67 with IPC's
+adaptive one (``--kappa auto``), more than ImplicitEuler's default 30.
 
 ``--cubes``: two aligned cubes, the upper one starting half of dhat above the lower one, timed
 on their first step (the barrier closes the gap by three decades) and on a step in resting
@@ -25,6 +26,11 @@ pair is parallel: the hardest case for the barrier's Newton.
     .venv/bin/python scripts/bench_ipc.py --no-saddle-extension  # Newton as before the doubling
     .venv/bin/python scripts/bench_ipc.py --cubes --projection abs   # IPC's other pair projection
     .venv/bin/python scripts/bench_ipc.py --velocity-tol 1e-3  # both sides with IPC's step rule
+    .venv/bin/python scripts/bench_ipc.py --kappa auto        # the drop with IPC's adaptive kappa
+
+``--kappa K`` (N/m^3, or ``auto``) replaces the scene's barrier stiffness: it sets the gap the
+ball rests at (0.7 mm at the scene's 1e7, 0.011 mm with ``auto``) and with it the Newton
+iterations of every contact step (docs/guide/contact.md, "Choosing kappa").
 
 ``--velocity-tol v`` (m/s) gives both sides ``fe.ImplicitEuler(velocity_tol=v)``: Newton also
 stops after a whole step on the exact tangent that moves no DOF by more than v * dt (IPC's
@@ -98,6 +104,8 @@ def time_step(model, state, dt, solver=None):
 MAX_ITER = 200
 #: Velocity tolerance (m/s) of both models' Newton (``--velocity-tol``; 0: the force rule alone)
 VELOCITY_TOL = 0.0
+#: The drop's IPC barrier stiffness (``--kappa``): None keeps the scene's, else N/m^3 or "auto"
+KAPPA = None
 
 
 def implicit_euler(solver=None):
@@ -121,6 +129,8 @@ def drop_runs(n):
         ball["mesh"]["cells"], block["mesh"]["cells"] = [n, n, n], [2 * n, 2 * n, n]
         if not ipc:
             scene.spec["contact"] = None
+        elif KAPPA is not None:
+            scene.spec["contact"]["kappa"] = KAPPA
         runs.append(scene.build()[0])
     return runs
 
@@ -135,7 +145,8 @@ def drop(n, steps, solver=None):
     print(f"two-body drop ({SCENE.name}): {m.mesh.t.shape[1]} tets, {m.ndofs} DOFs, "
           f"{m.collision_surface().n_vertices} surface vertices, dt = {dt} s, {steps} steps; "
           f"ImplicitEuler(max_iter={MAX_ITER}, velocity_tol={VELOCITY_TOL:g}), solver "
-          f"{'auto' if solver is None else solver!r}")
+          f"{'auto' if solver is None else solver!r}; IPC dhat = {m.contact.spec.dhat:g} m, kappa = "
+          f"{m.contact.spec.kappa if m.contact.spec.kappa == 'auto' else format(m.contact.spec.kappa, 'g')}")
     # warm-up (numba, ipctk, patterns): the free model, and a throwaway copy of the IPC one (the
     # timed model's contact state, kappa, stays as the scene starts it)
     time_step(mf, state, dt, solver)
@@ -336,14 +347,25 @@ def main(argv=None):
                     help="m/s: both sides' fe.ImplicitEuler(velocity_tol=V), IPC's rule (a whole exact "
                          "Newton step moving no DOF by more than V * dt ends the solve); default 0, "
                          "the force tolerance alone")
+    ap.add_argument("--kappa", default=None, metavar="K",
+                    help="the drop's IPC barrier stiffness, N/m^3 or 'auto' (IPC's adaptive rule); "
+                         "default the scene's (1e7)")
     ap.add_argument("--trace", action="store_true",
                     help="--cubes: only the first-contact step and the resting step, once each, "
                          "logging each Newton iteration (||g||, step fraction, exact or projected) "
                          "and each CCD bound")
     args = ap.parse_args(argv)
     solver = {"auto": None, "direct": fe.DirectSolver(), "amg": fe.AMGSolver()}[args.solver]
-    global VELOCITY_TOL
+    global VELOCITY_TOL, KAPPA
     VELOCITY_TOL = args.velocity_tol
+    if args.kappa is not None:
+        if args.kappa == "auto":
+            KAPPA = "auto"
+        else:
+            try:
+                KAPPA = float(args.kappa)
+            except ValueError:
+                ap.error(f"--kappa takes a stiffness in N/m^3 or 'auto', got {args.kappa!r}")
     if args.no_saddle_extension:
         from fem_elastic.solvers import newton
 

@@ -323,6 +323,18 @@ def test_bench_ipc_quick_prints_its_figures():
     # the ball meets the block within those 20 steps (at t ~ 0.14 s): both kinds of step occur
     assert "steps with no IPC pair within dhat" in out and "steps with IPC pairs" in out
     assert "whole drop:" in out and "ratio (IPC / no contact)" in out and "fitted exponent" in out
+    assert "kappa = 1e+07" in out  # the scene's own barrier stiffness
+
+
+def test_bench_ipc_kappa_replaces_the_scenes_stiffness():
+    script = Path(__file__).resolve().parent.parent / "scripts" / "bench_ipc.py"
+    r = subprocess.run([sys.executable, str(script), "--quick", "--steps", "2", "--no-broad-phase",
+                        "--kappa", "auto"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "kappa = auto" in r.stdout
+    bad = subprocess.run([sys.executable, str(script), "--quick", "--kappa", "stiff"],
+                         capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 2 and "--kappa takes a stiffness in N/m^3 or 'auto'" in bad.stderr
 
 
 def test_bench_ipc_cubes_prints_both_steps():
