@@ -11,7 +11,7 @@ weighs on both alike; each keeps its own CHOLMOD analysis and factor, as a run o
 splits the steps into those where no IPC pair is within dhat (the contact's fixed cost: broad
 phase, CCD, an empty barrier) and those with IPC pairs, and gives the median, the worst step and
 the whole drop. Both solves use ``max_iter=200``: the impact of a 21,870-tet drop takes 18
-Newton iterations with the scene's barrier stiffness (kappa = 1e7 N/m^3) and 67 with IPC's
+Newton iterations with the scene's barrier stiffness (kappa = 1e7 N/m^3), and 67 with IPC's
 adaptive one (``--kappa auto``), more than ImplicitEuler's default 30.
 
 ``--cubes``: two aligned cubes, the upper one starting half of dhat above the lower one, timed
@@ -40,6 +40,7 @@ convergence rule, besides the force tolerance).
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from pathlib import Path
 
@@ -365,7 +366,11 @@ def main(argv=None):
             try:
                 KAPPA = float(args.kappa)
             except ValueError:
-                ap.error(f"--kappa takes a stiffness in N/m^3 or 'auto', got {args.kappa!r}")
+                KAPPA = math.nan
+            if not (math.isfinite(KAPPA) and KAPPA > 0.0):
+                ap.error(f"--kappa takes a stiffness in N/m^3 (finite, > 0) or 'auto', got {args.kappa!r}")
+        if args.cubes:
+            ap.error("--kappa sets the drop's barrier stiffness; the cubes use IPC's adaptive one")
     if args.no_saddle_extension:
         from fem_elastic.solvers import newton
 

@@ -109,6 +109,38 @@ def test_barrier_gradient_and_hessian_match_finite_differences():
     assert np.linalg.eigvalsh(Hp).min() >= -1e-9 * np.abs(Hp).max()  # PSD to round-off
 
 
+def test_one_pair_pushes_with_the_barriers_force_and_its_small_gap_asymptote():
+    """A vertex at gap d above a triangle, the only pair within dhat: the force on it is
+    kappa |b'(d^2)| 2d (ipctk's b(s, t) = -(s - t)^2 ln(s / t) on squared distances), and for
+    d << dhat 2 kappa dhat^4 / d, the law IPCContact's kappa docstring and the user guide's
+    "Choosing kappa" give for the resting gap."""
+    dhat, kappa = 1e-3, 1e7
+    lower = (np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]]),
+             np.array([[0, 2, 1, 3]]))  # its top face is the triangle z = 0
+    # a tet pointing down at (0.25, 0.25), its other edges and vertices 0.1 m and more away
+    upper = (np.array([[0.25, 0.25, 0.01], [0.15, 0.25, 0.3], [0.35, 0.2, 0.3], [0.3, 0.35, 0.3]]),
+             np.array([[0, 1, 2, 3]]))
+    model = fe.Model(pieces(lower, upper), 1000.0, body(),
+                     contact=fe.IPCContact(dhat=dhat, kappa=kappa))
+    c = model.contact
+    apex_z = 3 * 4 + 2  # the upper tet's first node (4 in the mesh), z
+    t = dhat ** 2
+    for d in (1e-5, 1e-4, 5e-4):
+        x = model.X.copy()
+        x[apex_z] = d
+        diag = c.diagnostics(x)
+        assert diag["active_contacts"] == 1 and diag["min_distance"] == pytest.approx(d, rel=1e-12)
+        force = -c.gradient(x)[apex_z]  # upward, on the vertex
+        s = d * d
+        db_ds = -2.0 * (s - t) * np.log(s / t) - (s - t) ** 2 / s
+        assert force == pytest.approx(-kappa * db_ds * 2.0 * d, rel=1e-10)  # round-off
+        # the asymptote's relative error is 2 (d/dhat)^2 (ln(dhat^2/d^2) - 1) + O((d/dhat)^4):
+        # 0.16 % at d = dhat / 100, 1.6 % at dhat / 10
+        if d <= 1e-4:
+            rel = 2 * (d / dhat) ** 2 * (np.log(t / s) - 1.0)
+            assert force / (2.0 * kappa * dhat ** 4 / d) == pytest.approx(1.0 + rel, abs=(d / dhat) ** 3)
+
+
 # --- CCD and no intersection ---------------------------------------------------------------------
 
 
@@ -332,9 +364,13 @@ def test_bench_ipc_kappa_replaces_the_scenes_stiffness():
                         "--kappa", "auto"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "kappa = auto" in r.stdout
-    bad = subprocess.run([sys.executable, str(script), "--quick", "--kappa", "stiff"],
-                         capture_output=True, text=True, timeout=300)
-    assert bad.returncode == 2 and "--kappa takes a stiffness in N/m^3 or 'auto'" in bad.stderr
+    for bad_value in ("stiff", "-1", "nan"):
+        bad = subprocess.run([sys.executable, str(script), "--quick", "--kappa", bad_value],
+                             capture_output=True, text=True, timeout=300)
+        assert bad.returncode == 2 and "--kappa takes a stiffness in N/m^3 (finite, > 0)" in bad.stderr
+    cubes = subprocess.run([sys.executable, str(script), "--quick", "--cubes", "--kappa", "1e7"],
+                           capture_output=True, text=True, timeout=300)
+    assert cubes.returncode == 2 and "the cubes use IPC's adaptive one" in cubes.stderr
 
 
 def test_bench_ipc_cubes_prints_both_steps():
@@ -347,18 +383,24 @@ def test_bench_ipc_cubes_prints_both_steps():
 
 
 @pytest.mark.filterwarnings("ignore:IPC contact")
-def test_an_ipc_impact_that_runs_out_of_newton_iterations_says_to_raise_max_iter():
-    """Halving dt does not shorten an IPC impact: the error names max_iter, not only dt."""
+@pytest.mark.parametrize("kappa", ["scene", "auto"])
+def test_an_ipc_impact_that_runs_out_of_newton_iterations_says_to_raise_max_iter(kappa):
+    """Halving dt does not shorten an IPC impact: the error names max_iter and kappa, not only
+    dt (and says what "auto" does only when the barrier's stiffness is IPC's adaptive one)."""
     from fem_elastic.app.scene import load_scene
 
     scene = load_scene(Path(__file__).resolve().parent.parent / "scenes" / "two_bodies.toml")
+    if kappa == "auto":
+        scene.spec["contact"]["kappa"] = "auto"
     run = scene.build()[0]
     state = run.state
     for _ in range(13):  # to the step where the ball meets the block (t = 0.13 s)
         state = run.integrator.step(run.model, state, run.dt)
     assert run.model.contact.diagnostics(state.x)["active_contacts"] == 0
-    with pytest.raises(fe.Diverged, match=r"max_iter \(e\.g\. fe\.ImplicitEuler\(max_iter=200\)"):
+    with pytest.raises(fe.Diverged, match=r"max_iter \(e\.g\. fe\.ImplicitEuler\(max_iter=200\)") as err:
         fe.ImplicitEuler(max_iter=3, max_dt_cuts=1).step(run.model, state, run.dt)
+    assert "stiffen the barrier (fe.IPCContact(kappa=...)" in str(err.value)
+    assert ("'auto' keeps them far closer" in str(err.value)) == (kappa == "auto")
     # the same step with the scene's own budget takes more than 3 iterations and lands apart
     ie = fe.ImplicitEuler(max_iter=200)
     out = ie.step(run.model, state, run.dt)

@@ -150,7 +150,7 @@ def test_the_two_body_drop_with_velocity_tol_never_intersects_and_iterates_less(
 
     totals = []
     for ie in (fe.ImplicitEuler(max_iter=200), fe.ImplicitEuler(max_iter=200, velocity_tol=1e-3)):
-        # a fresh build each: the contact's adaptive stiffness starts as the scene starts it
+        # a fresh build each: the contact's state starts as the scene starts it
         run = load_scene(Path(__file__).resolve().parent.parent / "scenes" / "two_bodies.toml").build()[0]
         state, its, touched = run.state, 0, False
         for _ in range(20):  # 0.2 s: the flight, the impact at 0.13 s and the first rebound

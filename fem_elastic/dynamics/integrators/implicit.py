@@ -95,14 +95,16 @@ class _Implicit(Integrator):
             if why.startswith("Newton did not converge (no convergence") \
                     and _contact_max_step(model) is not None:
                 # halving dt does not shorten an IPC impact: every Newton step is bounded by the
-                # CCD, and the gap still closes over decades (67 iterations for the 21,870-tet
-                # drop of scripts/bench_ipc.py with kappa = "auto", 18 with the scene's 1e7)
+                # CCD, and the gap still closes, over decades with kappa = "auto" (67 iterations
+                # for the 21,870-tet drop of scripts/bench_ipc.py; 18 with the scene's 1e7)
+                spec = getattr(model.contact, "spec", None)
+                auto = " ('auto' keeps them far closer)" if getattr(spec, "kappa", None) == "auto" else ""
                 hint = (f"An impact under IPC contact takes many CCD-bounded Newton iterations, "
                         f"whatever the step: raise max_iter (e.g. fe.{self.name}(max_iter=200); "
                         "[integrator] max_iter = 200 in a scene), or stiffen the barrier "
-                        "(fe.IPCContact(kappa=...) so that resting bodies stay a fair fraction of "
-                        "dhat apart; 'auto' keeps them far closer, where Newton needs more "
-                        "iterations). Else " + hint[0].lower() + hint[1:])
+                        "(fe.IPCContact(kappa=...): Newton needs fewer iterations where resting "
+                        f"bodies stay a tenth of dhat apart or more{auto}). Else "
+                        + hint[0].lower() + hint[1:])
             raise Diverged(
                 f"{self.name} failed at t = {state.t:.6g} s even after halving dt {self.max_dt_cuts} "
                 f"times (to {h / 2 ** self.max_dt_cuts:.3g} s): {why}. {hint}",
