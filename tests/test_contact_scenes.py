@@ -5,6 +5,7 @@ step ipctk's exact intersection test must find no crossing triangles, and the ba
 on the block: it came down onto it, and did not pass into it.
 """
 
+from functools import lru_cache
 from pathlib import Path
 
 import pytest
@@ -17,12 +18,18 @@ pytest.importorskip("ipctk", reason="IPC contact needs the [contact] extra (ipct
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _run_checking_every_step(scene: str) -> tuple[fe.Model | fe.MultiBody, fe.Trajectory, list[int]]:
+@lru_cache(maxsize=None)  # the scene's own two-body drop serves two tests: run it once
+def _run_checking_every_step(scene: str, kappa: str | None = None
+                             ) -> tuple[fe.Model | fe.MultiBody, fe.Trajectory, list[int]]:
     """Run ``scenes/<scene>`` in full, asserting no intersection after every accepted step.
 
-    Returns the model, the trajectory and the number of active contact pairs after each step.
+    ``kappa``: replaces the scene's ``[contact] kappa`` (None: the scene's own). Returns the
+    model, the trajectory and the number of active contact pairs after each step.
     """
-    run = load_scene(ROOT / "scenes" / scene).build()[0]
+    scene_ = load_scene(ROOT / "scenes" / scene)
+    if kappa is not None:
+        scene_.spec["contact"]["kappa"] = kappa
+    run = scene_.build()[0]
     model = run.model
     active = []
 
@@ -54,7 +61,6 @@ def test_self_contact_fold_never_intersects():
     assert max(active) > 0  # the fold did bring the surfaces within dhat: contact was tested
 
 
-
 def test_the_scenes_kappa_sets_the_gap_the_ball_rests_at():
     """docs/guide/contact.md, "Choosing kappa": the barrier stiffness sets the resting gap. The
     scene's kappa (1e7 N/m^3) against IPC's adaptive one on the same drop: both stay
@@ -62,15 +68,9 @@ def test_the_scenes_kappa_sets_the_gap_the_ball_rests_at():
     of the two stiffnesses."""
     gaps, kappas = {}, {}
     for kappa in ("scene", "auto"):
-        scene = load_scene(ROOT / "scenes" / "two_bodies.toml")
-        if kappa == "auto":
-            scene.spec["contact"]["kappa"] = "auto"
-        run = scene.build()[0]
-        state = run.state
-        for _ in range(run.steps):
-            state = run.integrator.step(run.model, state, run.dt)
-            assert not run.model.contact.has_intersections(state.x)
-        d = run.model.contact.diagnostics(state.x)
+        model, traj, _ = _run_checking_every_step("two_bodies.toml",
+                                                  None if kappa == "scene" else kappa)
+        d = model.contact.diagnostics(traj.final_state.x)
         assert d["active_contacts"] > 0  # the ball rests on the block at the end
         gaps[kappa], kappas[kappa] = d["min_distance"], d["kappa"]
     assert kappas["scene"] == 1e7 and kappas["auto"] < kappas["scene"]

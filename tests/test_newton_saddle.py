@@ -10,8 +10,11 @@ The minimisers are ``(0, +-sqrt(a / (4 b)))``.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 
+import fem_elastic as fe
+from fem_elastic.solvers import linear_solvers, newton
 from fem_elastic.solvers.newton import newton_minimize
 
 A, B, C = 1.0, 0.25, 5.0  # a / c = 0.2: a full projected step grows y by 1.2 only
@@ -90,12 +93,9 @@ def test_a_convex_problem_is_never_extended():
 def test_extension_is_kept_to_models_whose_ccd_bounds_every_contact():
     """IPC with the ground (a half-space) or no obstacle: yes; a sphere or a box, checked only at
     a step's end, or no IPC: no."""
-    import pytest
-
     pytest.importorskip("ipctk")
     import warnings
 
-    import fem_elastic as fe
     from fem_elastic.solvers.newton import saddle_extension_safe
 
     mesh = fe.beam_mesh(length=0.1, width=0.1, height=0.1, cells=(1, 1, 1))
@@ -135,12 +135,7 @@ def test_an_extension_never_steps_past_the_ccd_bound():
 def test_under_contact_an_indefinite_exact_tangent_above_the_lu_size_is_projected(monkeypatch):
     """fe.AutoSolver: where CHOLMOD proves the exact tangent indefinite, SuperLU solves it up
     to newton.CONTACT_EXACT_LU_DOFS unknowns under contact; above, Newton projects at once."""
-    import pytest
-
     pytest.importorskip("sksparse")
-    import fem_elastic as fe
-    from fem_elastic.solvers import linear_solvers, newton
-
     lus = []
     lu_solve = linear_solvers.DirectSolver.solve
 
@@ -169,8 +164,6 @@ def test_under_contact_an_indefinite_exact_tangent_above_the_lu_size_is_projecte
 
 
 def test_a_users_lower_exact_lu_limit_is_kept_under_contact():
-    import fem_elastic as fe
-
     assert fe.AutoSolver().strict(max_lu_dofs=5000).max_exact_lu_dofs == 5000
     assert fe.AutoSolver(max_exact_lu_dofs=100).strict(max_lu_dofs=5000).max_exact_lu_dofs == 100
     assert fe.AutoSolver(max_exact_lu_dofs=10**6).strict(max_lu_dofs=5000).max_exact_lu_dofs == 5000

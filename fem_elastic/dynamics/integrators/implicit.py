@@ -236,8 +236,7 @@ class ImplicitEuler(_Implicit):
                 f"velocity_tol must be a finite number >= 0 (m/s; 0 turns it off), got "
                 f"{velocity_tol!r}.")
         self.velocity_tol = float(velocity_tol)
-        if self.velocity_tol > 0.0 and type(self) is ImplicitEuler \
-                and isinstance(self.linear_solver, PETScSolver):
+        if self.velocity_tol > 0.0 and self._distributed:
             raise InvalidParameter(_PETSC_VELOCITY_TOL)
         if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 1:
             raise InvalidParameter(f"max_iter must be an integer >= 1, got {max_iter!r}.")
@@ -253,9 +252,14 @@ class ImplicitEuler(_Implicit):
         """The first guess of Newton (a new array), tried against the old positions: G's target y."""
         return G.y.copy()
 
+    @property
+    def _distributed(self) -> bool:
+        """Whether the step runs across MPI ranks: fe.PETScSolver, for implicit Euler alone
+        (Newmark and the trapezoid share this step but not its objective: they stay serial)."""
+        return isinstance(self.linear_solver, PETScSolver) and type(self) is ImplicitEuler
+
     def _try(self, model, state, h, stats):
-        # (Newmark and the trapezoid share this step but not its objective: they stay serial)
-        if isinstance(self.linear_solver, PETScSolver) and type(self) is ImplicitEuler:
+        if self._distributed:
             return self._try_distributed(model, state, h, stats)
         free, dofs, xc, vc = self._start(model, state, h)
         G = self._objective(model, state, h)
